@@ -1,0 +1,123 @@
+"""Standard input data (SID) of a planar body in the floating frame of reference.
+
+A material point with undeformed body coordinates `c` sits at `r = R + A(theta) (c + Phi(c) q)`.
+For a finite element body the kinetic energy `T = 1/2 rdot_n^T M rdot_n` over all nodes is a
+quadratic form whose coefficients are the body integrals below, all quadratic forms of the
+consistent mass matrix `M` with nodal vectors (exact for the FE discretisation). With `I~` the
+rotation by +90 degrees applied node by node, `e_x`, `e_y` the nodal translation vectors and `c`
+the stacked undeformed coordinates:
+
+| field         | definition            | meaning                                   |
+|---------------|-----------------------|-------------------------------------------|
+| `mass`        | `e_x^T M e_x`         | total mass `m`                            |
+| `first_moment`| `[e_x, e_y]^T M c`    | `s0`, mass times centre of mass           |
+| `modal_moment`| `[e_x, e_y]^T M Phi`  | `S1` `(2, n_q)`, first moment of the modes|
+| `inertia`     | `c^T M c`             | `J0`, polar inertia about the frame origin|
+| `inertia_q`   | `Phi^T M c`           | `j1` `(n_q,)`                             |
+| `modal_mass`  | `Phi^T M Phi`         | `M_qq` `(n_q, n_q)` (identity if normalised)|
+| `coupling_0`  | `Phi^T M I~ c`        | `G0` `(n_q,)`, rotation–deformation coupling|
+| `coupling`    | `Phi^T M I~ Phi`      | `G` `(n_q, n_q)`, skew-symmetric (gyroscopic)|
+| `modal_stiffness` | `Phi^T K Phi`     | `K_qq` `(n_q, n_q)`                       |
+| `marker_positions` | `c_P`            | `(n_markers, 2)` undeformed joint points  |
+| `marker_modes`| `Phi(c_P)`            | `(n_markers, 2, n_q)` shape-function rows |
+
+(`M` of a plane element is `m_s ⊗ I_2` in interleaved degrees of freedom, so it commutes with
+rotations applied node by node; this is what makes the kinetic energy a function of these few
+integrals.) A rigid body is the same data with `n_q = 0`.
+"""
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._fe import RodMesh
+
+
+class BodyData(eqx.Module):
+    """Standard input data of one planar body (see the module docstring for each field)."""
+
+    mass: Float[Array, ""]
+    first_moment: Float[Array, "2"]
+    modal_moment: Float[Array, "2 n_q"]
+    inertia: Float[Array, ""]
+    inertia_q: Float[Array, " n_q"]
+    modal_mass: Float[Array, "n_q n_q"]
+    coupling_0: Float[Array, " n_q"]
+    coupling: Float[Array, "n_q n_q"]
+    modal_stiffness: Float[Array, "n_q n_q"]
+    marker_positions: Float[Array, "n_markers 2"]
+    marker_modes: Float[Array, "n_markers 2 n_q"]
+
+    @property
+    def n_modes(self) -> int:
+        return self.modal_mass.shape[0]
+
+
+def rigid_body_data(mass, first_moment, inertia, marker_positions) -> BodyData:
+    """Body data of a rigid body: mass, first moment `m c_G` and polar inertia about the frame origin.
+
+    **Arguments:**
+    - `mass`: scalar mass.
+    - `first_moment`: `(2,)` mass times the centre of mass in body coordinates.
+    - `inertia`: polar moment of inertia about the body-frame origin.
+    - `marker_positions`: `(n_markers, 2)` joint points in body coordinates.
+    """
+    marker_positions = jnp.asarray(marker_positions, dtype=float).reshape(-1, 2)
+    n_markers = marker_positions.shape[0]
+    return BodyData(
+        mass=jnp.asarray(mass, dtype=float),
+        first_moment=jnp.asarray(first_moment, dtype=float),
+        modal_moment=jnp.zeros((2, 0)),
+        inertia=jnp.asarray(inertia, dtype=float),
+        inertia_q=jnp.zeros((0,)),
+        modal_mass=jnp.zeros((0, 0)),
+        coupling_0=jnp.zeros((0,)),
+        coupling=jnp.zeros((0, 0)),
+        modal_stiffness=jnp.zeros((0, 0)),
+        marker_positions=marker_positions,
+        marker_modes=jnp.zeros((n_markers, 2, 0)),
+    )
+
+
+def _rotate_nodewise(v):
+    """`I~ v` node by node: `(u_x, u_y) -> (-u_y, u_x)` for stacked vectors `(2 n, ...)`."""
+    pairs = v.reshape((-1, 2) + v.shape[1:])
+    return jnp.stack([-pairs[:, 1], pairs[:, 0]], axis=1).reshape(v.shape)
+
+
+def flexible_body_data(mesh: RodMesh, mass_matrix, stiffness_matrix, modes, marker_nodes: tuple[int, ...]) -> BodyData:
+    """Standard input data of a finite element body from its matrices and retained modes.
+
+    Every integral is evaluated as a quadratic form of the consistent mass matrix with nodal
+    vectors, so it is exact for the FE model (see the module docstring for the definitions).
+
+    **Arguments:**
+    - `mesh`: node coordinates (body frame) and layout.
+    - `mass_matrix`, `stiffness_matrix`: `(n_dof, n_dof)` global `M` and `K`.
+    - `modes`: `(n_dof, n_q)` the shape vectors `Phi`.
+    - `marker_nodes`: static tuple of node indices used as joint points.
+
+    **Returns:** a [`BodyData`][].
+    """
+    coords = jnp.asarray(mesh.node_coordinates())
+    c = coords.ravel()
+    n_dof = c.size
+    e = jnp.zeros((n_dof, 2)).at[0::2, 0].set(1.0).at[1::2, 1].set(1.0)
+    m_phi = mass_matrix @ modes
+    m_c = mass_matrix @ c
+    m_e = mass_matrix @ e
+    idx = jnp.asarray(marker_nodes, dtype=int)
+    marker_modes = modes.reshape(-1, 2, modes.shape[1])[idx]
+    return BodyData(
+        mass=e[:, 0] @ m_e[:, 0],
+        first_moment=e.T @ m_c,
+        modal_moment=e.T @ m_phi,
+        inertia=c @ m_c,
+        inertia_q=modes.T @ m_c,
+        modal_mass=modes.T @ m_phi,
+        coupling_0=m_phi.T @ _rotate_nodewise(c),
+        coupling=m_phi.T @ _rotate_nodewise(modes),
+        modal_stiffness=modes.T @ (stiffness_matrix @ modes),
+        marker_positions=coords[idx],
+        marker_modes=marker_modes,
+    )

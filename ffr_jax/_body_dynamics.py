@@ -1,0 +1,79 @@
+"""Equations of motion of one free planar body from its standard input data (paper eq. 8).
+
+Body coordinates `y_b = (R_x, R_y, theta, q)` and velocities `z_b = dy_b/dt` (in the plane the
+kinematic matrix `Z` of paper eq. 6 is the identity). With `u = c + Phi q` a node's position in
+the body frame, `A` the rotation by `theta` and `I~` the rotation by +90 degrees,
+
+`rdot = Rdot + A (theta' I~ u + Phi q')`,
+`rddot = Rddot + A (theta'' I~ u + Phi q'' - theta'^2 u + 2 theta' I~ Phi q')`,
+
+and the virtual work `sum_n delta r_n^T M rddot_n` gives `M_b(y_b) zdot_b + h_omega = h_a` with
+(`S_u = s0 + S1 q`):
+
+- `M_RR = m I`, `M_Rtheta = A I~ S_u`, `M_Rq = A S1`,
+- `M_thetatheta = J0 + 2 j1.q + q^T M_qq q`, `M_thetaq = (G0 + G q)^T`, `M_qq`,
+- `h_omega,R = A (-theta'^2 S_u + 2 theta' I~ S1 q')`,
+- `h_omega,theta = 2 theta' (j1 + M_qq q).q'`,
+- `h_omega,q = -theta'^2 (j1 + M_qq q) + 2 theta' G q'`, and the inner force `h_e = K_qq q`.
+"""
+
+import jax.numpy as jnp
+
+from ._body_data import BodyData
+
+
+def rotation(theta):
+    """The planar rotation matrix `A(theta)`."""
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    return jnp.array([[c, -s], [s, c]])
+
+
+def _perp(v):
+    """`I~ v`: rotation of a 2-vector (or each column of a `(2, k)` array) by +90 degrees."""
+    return jnp.stack([-v[1], v[0]])
+
+
+def split_body_coordinates(y_b, n_modes: int):
+    """`y_b -> (R, theta, q)`."""
+    del n_modes
+    return y_b[:2], y_b[2], y_b[3:]
+
+
+def body_mass_matrix(data: BodyData, y_b):
+    """Mass matrix `M_b(y_b)`, `(3 + n_q, 3 + n_q)`, symmetric positive definite."""
+    _, theta, q = split_body_coordinates(y_b, data.n_modes)
+    a = rotation(theta)
+    s_u = data.first_moment + data.modal_moment @ q
+    m_rr = data.mass * jnp.eye(2)
+    m_rt = a @ _perp(s_u)
+    m_rq = a @ data.modal_moment
+    m_tt = data.inertia + 2 * data.inertia_q @ q + q @ data.modal_mass @ q
+    m_tq = data.coupling_0 + data.coupling @ q
+    top = jnp.concatenate([m_rr, m_rt[:, None], m_rq], axis=1)
+    mid = jnp.concatenate([m_rt[None, :], m_tt[None, None], m_tq[None, :]], axis=1)
+    bot = jnp.concatenate([m_rq.T, m_tq[:, None], data.modal_mass], axis=1)
+    return jnp.concatenate([top, mid, bot], axis=0)
+
+
+def body_inertia_and_elastic_forces(data: BodyData, y_b, z_b):
+    """`-h_omega - h_e`: the quadratic-velocity (Coriolis, centrifugal) and elastic forces, `(3 + n_q,)`."""
+    _, theta, q = split_body_coordinates(y_b, data.n_modes)
+    _, dtheta, dq = split_body_coordinates(z_b, data.n_modes)
+    a = rotation(theta)
+    s_u = data.first_moment + data.modal_moment @ q
+    mq = data.inertia_q + data.modal_mass @ q
+    h_r = a @ (-(dtheta**2) * s_u + 2 * dtheta * _perp(data.modal_moment @ dq))
+    h_t = 2 * dtheta * (mq @ dq)
+    h_q = -(dtheta**2) * mq + 2 * dtheta * (data.coupling @ dq) + data.modal_stiffness @ q
+    return -jnp.concatenate([h_r, h_t[None], h_q])
+
+
+def marker_position(data: BodyData, marker: int, y_b):
+    """Inertial position `r_P = R + A(theta) (c_P + Phi_P q)` of body marker `marker`."""
+    r, theta, q = split_body_coordinates(y_b, data.n_modes)
+    return r + rotation(theta) @ (data.marker_positions[marker] + data.marker_modes[marker] @ q)
+
+
+def body_kinetic_energy(data: BodyData, y_b, z_b):
+    """`T = 1/2 z_b^T M_b(y_b) z_b` from the body data."""
+    return 0.5 * z_b @ body_mass_matrix(data, y_b) @ z_b

@@ -1,0 +1,103 @@
+"""A case: a scene whose flexible rod is shaped by a density design, with its objective.
+
+The case is the design → parameter map of the data flow:
+`x → (K(x), M(x)) → (Phi(x), omega(x)) → body data → scene p(x)`.
+"""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ._body_data import BodyData, flexible_body_data
+from ._fe import RodMesh, mass_matrix, stiffness_matrix
+from ._model import MinimalModel
+from ._modes import ModalBasis, hinged_modes
+from ._objective._base import AbstractIntegrand
+from ._scene._scene import Scene
+from ._simp import SIMP, RodDesign
+from ._typing import Design
+
+
+class FlexibleRodCase(eqx.Module):
+    """A multibody scene with one density-parameterised flexible rod, an objective and a time span.
+
+    - `design`: mesh, SIMP law and design-vector layout of the rod.
+    - `n_modes`: retained hinged–hinged modes (REFERENCE_CASE §2).
+    - `body`: index of the rod in the scene; `scene_template`: the scene with the rod's data at
+      the initial design (only its structure and non-rod parameters are used).
+    - `model`: the partitioned minimal-coordinate model.
+    - `integrand`: `F` of `psi = int F dt`; `t0`, `t1`: time span; `y_r0`, `z_r0`: consistent
+      redundant initial state; `jump_ts`: times where drivers switch pieces.
+    """
+
+    design: RodDesign
+    n_modes: int = eqx.field(static=True)
+    body: int = eqx.field(static=True)
+    scene_template: Scene
+    model: MinimalModel
+    integrand: AbstractIntegrand
+    t0: float = eqx.field(static=True)
+    t1: float = eqx.field(static=True)
+    y_r0: jnp.ndarray
+    z_r0: jnp.ndarray
+    jump_ts: tuple[float, ...] = eqx.field(static=True, default=())
+
+    # --- the design side --------------------------------------------------------------------
+    @property
+    def mesh(self) -> RodMesh:
+        return self.design.mesh
+
+    @property
+    def material(self) -> SIMP:
+        return self.design.material
+
+    @property
+    def n_design(self) -> int:
+        return self.design.n_design
+
+    def initial_design(self, value: float = 0.5) -> Design:
+        """A uniform design `x_e = value`, flat in the REFERENCE_CASE §1 order."""
+        return self.design.initial_design(value)
+
+    @property
+    def fixed_dofs(self) -> tuple[int, ...]:
+        """Hinged–hinged modal boundary conditions: `u_x(A)`, `u_y(A)`, `u_y(B)`."""
+        a, b = self.mesh.node_a, self.mesh.node_b
+        return (2 * a, 2 * a + 1, 2 * b + 1)
+
+    @property
+    def marker_nodes(self) -> tuple[int, ...]:
+        """Joint points of the rod: marker 0 is A, marker 1 is B."""
+        return (self.mesh.node_a, self.mesh.node_b)
+
+    def fe_matrices(self, x: Design):
+        """`(K(x), M(x))`, dense `(n_dof, n_dof)`."""
+        x = self.design.check(x)
+        xe = self.design.element_densities(x)
+        return stiffness_matrix(self.mesh, self.material.youngs(xe)), mass_matrix(self.mesh, self.material.densities(xe))
+
+    def modes(self, x: Design) -> ModalBasis:
+        k, m = self.fe_matrices(x)
+        return hinged_modes(k, m, self.fixed_dofs, self.n_modes)
+
+    def frequencies(self, x: Design):
+        """Retained natural frequencies in Hz, `(n_modes,)`."""
+        return self.modes(x).frequencies
+
+    def body_data(self, x: Design) -> BodyData:
+        """Standard input data of the rod for design `x`."""
+        k, m = self.fe_matrices(x)
+        basis = hinged_modes(k, m, self.fixed_dofs, self.n_modes)
+        return flexible_body_data(self.mesh, m, k, basis.modes, self.marker_nodes)
+
+    def scene(self, x: Design) -> Scene:
+        """The parameter pytree `p(x)`: the scene with the rod's body data for design `x`."""
+        return self.with_body_data(self.body_data(x))
+
+    def with_body_data(self, data: BodyData) -> Scene:
+        return eqx.tree_at(lambda s: s.bodies[self.body].data, self.scene_template, data)
+
+    # --- helpers ----------------------------------------------------------------------------
+    def design_grid(self, values) -> np.ndarray:
+        """Reshape a design-ordered vector to the `(ny, nx - 2)` grid (rows bottom to top)."""
+        return np.asarray(values).reshape(self.mesh.ny, self.mesh.nx - 2)

@@ -1,0 +1,1 @@
+"""Scene elements: bodies, constraints (joints and drivers), force elements and effects."""

@@ -1,0 +1,51 @@
+"""Structural damping of a flexible body."""
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from ._base import AbstractForce
+
+
+class RayleighDamping(AbstractForce):
+    """Rayleigh damping of the elastic coordinates of body `body`: `Q_q = -(alpha M_qq + beta K_qq) q'`."""
+
+    body: int = eqx.field(static=True)
+    alpha: jnp.ndarray
+    beta: jnp.ndarray
+
+    def __init__(self, body: int, alpha: float = 0.0, beta: float = 0.0):
+        self.body = body
+        self.alpha, self.beta = jnp.asarray(float(alpha)), jnp.asarray(float(beta))
+
+    def generalized_force(self, t, y_r, z_r, scene):
+        del t, y_r
+        data = scene.bodies[self.body].data
+        dq = scene.body_coordinates(self.body, z_r)[3:]
+        q_force = -(self.alpha * data.modal_mass + self.beta * data.modal_stiffness) @ dq
+        return scene.scatter(self.body, jnp.concatenate([jnp.zeros(3), q_force]))
+
+
+class ModalDamping(AbstractForce):
+    """Modal damping ratio `zeta` for every retained mode of body `body`.
+
+    `Q_q = -2 zeta M_qq Omega q'` with `Omega = sqrt(M_qq^-1 K_qq)` (matrix square root, so the
+    force is invariant under rotations of the modal basis).
+    """
+
+    body: int = eqx.field(static=True)
+    ratio: jnp.ndarray
+
+    def __init__(self, body: int, ratio: float):
+        self.body = body
+        self.ratio = jnp.asarray(float(ratio))
+
+    def generalized_force(self, t, y_r, z_r, scene):
+        del t, y_r
+        data = scene.bodies[self.body].data
+        dq = scene.body_coordinates(self.body, z_r)[3:]
+        chol = jnp.linalg.cholesky(data.modal_mass)
+        linv_k = jnp.linalg.solve(chol, jnp.linalg.solve(chol, data.modal_stiffness).T)
+        lam, v = jnp.linalg.eigh(0.5 * (linv_k + linv_k.T))
+        omega_hat = (v * jnp.sqrt(jnp.maximum(lam, 0.0))) @ v.T
+        c = 2 * self.ratio * chol @ omega_hat @ chol.T
+        return scene.scatter(self.body, jnp.concatenate([jnp.zeros(3), -c @ dq]))

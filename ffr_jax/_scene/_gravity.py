@@ -1,0 +1,41 @@
+"""Gravity on every body."""
+
+import jax.numpy as jnp
+
+from .._body_dynamics import rotation
+from ._base import AbstractForce
+
+
+class Gravity(AbstractForce):
+    """Uniform gravity `g` `(2,)` on all bodies.
+
+    For a body, the virtual work of `M (e g)` over the mesh gives exactly the `R` columns of the
+    body mass matrix times `g`: `Q_R = m g`, `Q_theta = (A I~ S_u) . g`, `Q_q = S1^T A^T g`.
+    Potential `V = -g . (m R + A S_u)` with `S_u = s0 + S1 q`.
+    """
+
+    acceleration: jnp.ndarray
+
+    def __init__(self, acceleration=(0.0, -9.81)):
+        self.acceleration = jnp.asarray(acceleration, dtype=float)
+
+    def generalized_force(self, t, y_r, z_r, scene):
+        del t, z_r
+        parts = []
+        for b, body in enumerate(scene.bodies):
+            y_b = scene.body_coordinates(b, y_r)
+            a = rotation(y_b[2])
+            s_u = body.data.first_moment + body.data.modal_moment @ y_b[3:]
+            g = self.acceleration
+            q_theta = a @ jnp.stack([-s_u[1], s_u[0]])
+            parts.append(jnp.concatenate([body.data.mass * g, (q_theta @ g)[None], body.data.modal_moment.T @ (a.T @ g)]))
+        return jnp.concatenate(parts)
+
+    def potential_energy(self, t, y_r, scene):
+        del t
+        total = jnp.zeros(())
+        for b, body in enumerate(scene.bodies):
+            y_b = scene.body_coordinates(b, y_r)
+            s_u = body.data.first_moment + body.data.modal_moment @ y_b[3:]
+            total = total - self.acceleration @ (body.data.mass * y_b[:2] + rotation(y_b[2]) @ s_u)
+        return total

@@ -1,0 +1,34 @@
+"""Point-on-line joint: a massless, frictionless slider on an inertial line."""
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from ._base import AbstractConstraint
+
+
+class PointOnLine(AbstractConstraint):
+    """Marker `marker` of body `body` stays on the line through `point` with direction `direction`.
+
+    One equation, `c = n . (r_P - point)` with `n` the unit normal of the line; the body turns
+    and slides freely.
+    """
+
+    body: int = eqx.field(static=True)
+    marker: int = eqx.field(static=True)
+    point: jnp.ndarray
+    direction: jnp.ndarray
+
+    def __init__(self, body: int, marker: int, point=(0.0, 0.0), direction=(1.0, 0.0)):
+        d = jnp.asarray(direction, dtype=float)
+        self.body, self.marker = body, marker
+        self.point = jnp.asarray(point, dtype=float)
+        self.direction = d / jnp.linalg.norm(d)
+
+    @property
+    def n_equations(self) -> int:
+        return 1
+
+    def residual(self, t, y_r, scene):
+        del t
+        normal = jnp.stack([-self.direction[1], self.direction[0]])
+        return (normal @ (scene.marker_position(self.body, self.marker, y_r) - self.point))[None]

@@ -1,0 +1,110 @@
+"""The flexible slider–crank of the paper (Sect. 4), exactly as fixed in REFERENCE_CASE.md."""
+
+import functools
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._body_data import flexible_body_data
+from .._case import FlexibleRodCase
+from .._fe import RodMesh, mass_matrix, stiffness_matrix
+from .._model import MinimalModel, choose_partition
+from .._modes import hinged_modes
+from .._objective._compliance import Compliance
+from .._scene._body import Body
+from .._scene._laws import RampLaw
+from .._scene._point_on_line import PointOnLine
+from .._scene._prescribed_point import CrankPin
+from .._scene._scene import Scene
+from .._simp import SIMP, RodDesign
+
+
+def _rigid_slider_crank_guess(t, y, scene, *, length):
+    """Rigid-body estimate of `(R_x, R_y, theta)`: `R = P(t)`, `sin theta = -P_y / l`."""
+    del y
+    pin = scene.constraints[0].pin(t)
+    return jnp.stack([pin[0], pin[1], -jnp.arcsin(pin[1] / length)])
+
+
+def rod_template(design: RodDesign, n_modes: int, value: float = 0.5):
+    """Body data of the rod at a uniform design (used to build scenes and choose partitions)."""
+    mesh = design.mesh
+    xe = design.element_densities(design.initial_design(value))
+    k = stiffness_matrix(mesh, design.material.youngs(xe))
+    m = mass_matrix(mesh, design.material.densities(xe))
+    a, b = mesh.node_a, mesh.node_b
+    basis = hinged_modes(k, m, (2 * a, 2 * a + 1, 2 * b + 1), n_modes)
+    return flexible_body_data(mesh, m, k, basis.modes, (a, b))
+
+
+def slider_crank(
+    nx: int = 100,
+    ny: int = 6,
+    n_modes: int = 6,
+    t1: float = 3.0,
+    *,
+    eccentricity: float = 0.1,
+    speed: float = 12 * np.pi,
+    t_ramp: float = 2.0,
+    length: float = 1.0,
+    height: float = 0.06,
+    thickness: float = 0.01,
+    material: SIMP = SIMP(),
+) -> FlexibleRodCase:
+    """The flexible slider–crank (REFERENCE_CASE.md, paper Sect. 4) and its family of small variants.
+
+    A rigid crank of eccentricity `eps` turns about the inertial origin with the prescribed angle
+    of paper eqs. 45–46 (run-up to `speed` within `t_ramp`, then constant speed; the angle at
+    `t_ramp` is `speed * t_ramp / 2`, i.e. `12 pi` for the reference). The rod's point A follows the
+    crank pin; point B slides on the inertial x-axis. Coordinates `y_r = (R_x, R_y, theta, q)`,
+    independent `y = q`, dependent `(R_x, R_y, theta)`, initial state at rest with
+    `R = (eps, 0)`, `theta = 0`, `q = 0`. The objective is the integral compliance (eq. 49).
+
+    **Arguments:**
+    - `nx`, `ny`: mesh of the rod (`ny` even, `nx >= 4`); `n_modes`: retained modes; `t1`: end time.
+    - `eccentricity`, `speed`, `t_ramp`: crank; `length`, `height`, `thickness`: rod.
+    - `material`: the SIMP law (defaults of REFERENCE_CASE §1).
+
+    **Returns:** a [`FlexibleRodCase`][].
+    """
+    if not 0 < eccentricity < length:
+        raise ValueError(
+            f"The crank eccentricity must lie in (0, l) = (0, {length}) for the slider–crank to assemble "
+            f"at every crank angle, got {eccentricity}."
+        )
+    if t1 <= 0:
+        raise ValueError(f"t1 must be positive, got {t1}.")
+    mesh = RodMesh(nx, ny, length, height, thickness)
+    design = RodDesign(mesh, material)
+    rod = Body("rod", rod_template(design, n_modes))
+    law = RampLaw(t_ramp=t_ramp, angle_at_ramp=speed * t_ramp / 2, speed=speed)
+    scene = Scene(
+        bodies=(rod,),
+        constraints=(
+            CrankPin(body=0, marker=0, radius=eccentricity, angle=law),
+            PointOnLine(body=0, marker=1, point=(0.0, 0.0), direction=(1.0, 0.0)),
+        ),
+    )
+    y_r0 = jnp.zeros(scene.n_coordinates).at[0].set(eccentricity)
+    z_r0 = jnp.zeros(scene.n_coordinates)
+    partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=(0, 1, 2))
+    model = MinimalModel(
+        partition=partition,
+        reference_dependent=y_r0[np.asarray(partition.dependent)],
+        dependent_guess=functools.partial(_rigid_slider_crank_guess, length=length)
+        if partition.dependent == (0, 1, 2)
+        else None,
+    )
+    return FlexibleRodCase(
+        design=design,
+        n_modes=n_modes,
+        body=0,
+        scene_template=scene,
+        model=model,
+        integrand=Compliance(body=0),
+        t0=0.0,
+        t1=float(t1),
+        y_r0=y_r0,
+        z_r0=z_r0,
+        jump_ts=law.breakpoints,
+    )
