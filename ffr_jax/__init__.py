@@ -4,3 +4,29 @@ import jax as _jax
 
 # float64 throughout: the one place the package sets it.
 _jax.config.update("jax_enable_x64", True)
+
+from . import cases as cases
+from ._api import objective as objective, simulate_case as simulate_case
+from ._body_data import BodyData as BodyData, flexible_body_data as flexible_body_data, rigid_body_data as rigid_body_data
+from ._case import FlexibleRodCase as FlexibleRodCase
+from ._fe import RodMesh as RodMesh, mass_matrix as mass_matrix, stiffness_matrix as stiffness_matrix
+from ._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
+from ._modes import ModalBasis as ModalBasis, hinged_modes as hinged_modes, retained_eigenpairs as retained_eigenpairs
+from ._objective._base import AbstractIntegrand as AbstractIntegrand
+from ._objective._compliance import Compliance as Compliance
+from ._objective._function import FunctionIntegrand as FunctionIntegrand
+from ._scene._angle_driver import AngleDriver as AngleDriver
+from ._scene._applied_force import AppliedForce as AppliedForce
+from ._scene._base import AbstractConstraint as AbstractConstraint, AbstractForce as AbstractForce
+from ._scene._body import Body as Body
+from ._scene._damping import ModalDamping as ModalDamping, RayleighDamping as RayleighDamping
+from ._scene._ground_revolute import GroundRevolute as GroundRevolute
+from ._scene._gravity import Gravity as Gravity
+from ._scene._laws import AbstractLaw as AbstractLaw, ConstantSpeedLaw as ConstantSpeedLaw, RampLaw as RampLaw
+from ._scene._point_on_line import PointOnLine as PointOnLine
+from ._scene._prescribed_point import CrankPin as CrankPin
+from ._scene._revolute import Revolute as Revolute
+from ._scene._scene import Scene as Scene
+from ._scene._spring_damper import SpringDamper as SpringDamper
+from ._simp import SIMP as SIMP, RodDesign as RodDesign
+from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state, simulate as simulate
