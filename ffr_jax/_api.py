@@ -3,8 +3,34 @@
 import diffrax
 
 from ._case import FlexibleRodCase
+from ._scene._scene import Scene
+from ._sensitivity._adjoint import Adjoint
+from ._sensitivity._autodiff import Autodiff
+from ._sensitivity._backsolve import Backsolve
+from ._sensitivity._base import AbstractSensitivity
+from ._sensitivity._direct import Direct
+from ._sensitivity._finite_differences import FiniteDifferences
 from ._simulate import Trajectory, simulate
 from ._typing import Design
+
+
+METHODS = {
+    "adjoint": Adjoint,
+    "autodiff": Autodiff,
+    "backsolve": Backsolve,
+    "direct": Direct,
+    "fd": FiniteDifferences,
+}
+
+
+def sensitivity_method(method: str | AbstractSensitivity) -> AbstractSensitivity:
+    """Map a method name (`"adjoint"`, `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`) to its object."""
+    if isinstance(method, AbstractSensitivity):
+        return method
+    if method not in METHODS:
+        raise ValueError(f"Unknown sensitivity method {method!r}; choose one of {sorted(METHODS)} "
+                         "or pass an AbstractSensitivity instance (e.g. ffr_jax.Adjoint(rtol=1e-9)).")
+    return METHODS[method]()
 
 
 def simulate_case(case: FlexibleRodCase, x: Design, *, rtol: float = 1e-10, atol: float = 1e-12,
@@ -30,3 +56,45 @@ def objective(case: FlexibleRodCase, x: Design, *, rtol: float = 1e-10, atol: fl
     **Returns:** scalar `psi`.
     """
     return simulate_case(case, x, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps).psi
+
+
+def value_and_grad(case: FlexibleRodCase, x: Design, method: str | AbstractSensitivity = "adjoint", *,
+                   rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
+                   max_steps: int = 1_000_000):
+    """`(psi(x), grad psi(x))` of a case by the chosen sensitivity method.
+
+    **Arguments:**
+    - `case`: e.g. `ffr_jax.cases.slider_crank()`; `x`: `(n_design,)` densities in `[x_min, 1]`.
+    - `method`: `"adjoint"` (the paper's adjoint variable method, default), `"autodiff"`
+      (`jax.grad` through diffrax), `"backsolve"` (diffrax `BacksolveAdjoint`), `"direct"`
+      (forward sensitivities), `"fd"` (central differences), or a configured method object such
+      as `ffr_jax.Adjoint(rtol=1e-9, atol=1e-11)` or `ffr_jax.FiniteDifferences(step=1e-4)`.
+    - `rtol`, `atol`: forward tolerances (the paper's 1e-10 / 1e-12 by default).
+    - `solver`: diffrax solver of the forward (and, by default, backward) solve; default `Tsit5()`.
+    - `max_steps`: step budget of each solve.
+
+    **Returns:** `(psi, grad)`, a scalar and an array shaped like `x`. Works under `jax.jit`
+    and `jax.vmap` (a batch of designs).
+
+    **Example:**
+    ```python
+    import ffr_jax as fj
+    case = fj.cases.slider_crank()
+    psi, grad = fj.value_and_grad(case, case.initial_design(0.5))
+    ```
+    """
+    x = case.design.check(x)
+    return sensitivity_method(method).value_and_grad_design(
+        case, x, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps
+    )
+
+
+def value_and_grad_scene(case: FlexibleRodCase, scene: Scene, method: str | AbstractSensitivity = "adjoint", *,
+                         rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
+                         max_steps: int = 1_000_000):
+    """`(psi, dpsi/dp)` with respect to every array of the scene (body data, spring constants, crank
+    radius, law coefficients, ...): a pytree like `scene`, `None` where a leaf is not a float array.
+    """
+    return sensitivity_method(method).value_and_grad_scene(
+        case, scene, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps
+    )

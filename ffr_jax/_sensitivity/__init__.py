@@ -1,0 +1,1 @@
+"""Sensitivity methods: the paper's adjoint variable method and its cross-checks."""
