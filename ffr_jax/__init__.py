@@ -30,3 +30,12 @@ from ._scene._scene import Scene as Scene
 from ._scene._spring_damper import SpringDamper as SpringDamper
 from ._simp import SIMP as SIMP, RodDesign as RodDesign
 from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state, simulate as simulate
+from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
+from ._optimize._driver import OptimizeResult as OptimizeResult, optimize as optimize
+from ._optimize._filter import DensityFilter as DensityFilter
+from ._optimize._history import History as History
+from ._optimize._oc import optimality_criteria as optimality_criteria
+from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective
+from ._optimize._plot import plot_design as plot_design, plot_history as plot_history
+from ._optimize._step import StepInfo as StepInfo, make_step as make_step
+from ._optimize._volume import VolumeConstraint as VolumeConstraint

@@ -6,6 +6,8 @@ import time
 
 import numpy as np
 
+from ._optimize._cli import add_optimize_parser
+
 
 def _add_case_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("case", choices=["slider-crank"], help="the scene (the paper's reference case)")
@@ -47,6 +49,7 @@ def main(argv=None) -> int:
     p_info = sub.add_parser("info", help="frequencies, mass and body data of a case's rod")
     _add_case_arguments(p_info)
     p_info.set_defaults(func=_info)
+    add_optimize_parser(sub)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

@@ -1,0 +1,62 @@
+"""The design gradient as a drop-in objective `x -> (psi, grad psi)` for an optimizer."""
+
+from collections.abc import Callable
+
+from .. import _api
+from .._case import FlexibleRodCase
+from .._sensitivity._base import AbstractSensitivity
+from ._filter import DensityFilter
+
+
+def filtered_objective(fun: Callable, filter: DensityFilter | None) -> Callable:
+    """An objective of the design through a density filter, with its gradient pulled back.
+
+    For `(psi_phys, g_phys) = fun(x_phys)` returns `x -> (psi_phys(H x), H^T g_phys(H x))`, the
+    value and exact gradient of `psi(x) = psi_phys(H x)`.
+
+    **Arguments:**
+    - `fun`: `x_phys -> (value, grad)` with `grad` shaped like `x_phys`.
+    - `filter`: a [`DensityFilter`][], or `None` for `fun` itself.
+
+    **Returns:** `x -> (value, grad)` with `grad` shaped like `x`.
+    """
+    if filter is None:
+        return fun
+
+    def fun_of_design(x):
+        value, grad = fun(filter(x))
+        return value, filter.transpose(grad)
+
+    return fun_of_design
+
+
+def make_objective(case: FlexibleRodCase, method: str | AbstractSensitivity = "adjoint",
+                   filter: DensityFilter | None = None, **kwargs) -> Callable:
+    """The objective of a case as a pure function `x -> (psi, grad psi)` for an optax loop.
+
+    `psi` is the case's integral objective (REFERENCE_CASE §4) of the physical densities
+    `x_phys = H x`, and `grad` its exact gradient with respect to the design `x`,
+    `H^T grad psi(x_phys)` (see [`filtered_objective`][]). The function is pure and traceable, so
+    it runs under `jax.jit` (compile it once, e.g. inside [`make_step`][]) and `jax.vmap`.
+
+    **Arguments:**
+    - `case`: e.g. `ffr_jax.cases.slider_crank(nx=12, ny=2, n_modes=3, t1=0.2)`.
+    - `method`: sensitivity method of `ffr_jax.value_and_grad`: `"adjoint"` (default),
+      `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`, or a configured method object.
+    - `filter`: a [`DensityFilter`][] or `None`.
+    - `**kwargs`: passed on to `ffr_jax.value_and_grad`, e.g. `rtol=1e-8, atol=1e-10`.
+
+    **Returns:** `fun(x) -> (psi, grad)`, a scalar and an array shaped like `x`.
+
+    **Example:**
+    ```python
+    fun = fj.make_objective(case, filter=fj.DensityFilter(case.design, 1.5), rtol=1e-6, atol=1e-12)
+    psi, grad = jax.jit(fun)(case.initial_design(0.5))
+    ```
+    """
+    method = _api.sensitivity_method(method)  # an unknown name fails here, not at the first step
+
+    def fun(x):
+        return _api.value_and_grad(case, x, method, **kwargs)
+
+    return filtered_objective(fun, filter)

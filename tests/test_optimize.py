@@ -1,0 +1,384 @@
+"""Topology optimisation: density filter, volume projection, OC update, optax step, driver,
+checkpoints and the `optimize` CLI.
+
+Most tests run on a cheap convex surrogate `psi(x) = sum(w / x) + sum(m x^2)` whose gradient has
+both signs (like the inertia-affected compliance); one runs a few steps of the real tiny case.
+"""
+
+import json
+import os
+import zipfile
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+import scipy.optimize
+
+import ffr_jax as fj
+from ffr_jax._cli import main
+
+VOLUME = 0.4
+VOLUME_TOL = 1e-10  # the projection meets V to round-off; the issue asks for 1e-6
+ROUND_OFF = 1e-12
+FD_REL_TOL = 1e-7
+
+
+def small_design(nx=12, ny=4):
+    return fj.RodDesign(fj.RodMesh(nx, ny), fj.SIMP())
+
+
+def surrogate(n, seed=0):
+    """`psi(x) = sum(w / x) + sum(m x^2)` and its `value_and_grad`; `dpsi/dx` has both signs."""
+    rng = np.random.default_rng(seed)
+    w = jnp.asarray(rng.uniform(0.1, 1.0, n))
+    m = jnp.asarray(rng.uniform(0.0, 4.0, n))
+
+    def psi(x):
+        return jnp.sum(w / x) + jnp.sum(m * x**2)
+
+    return psi, jax.value_and_grad(psi)
+
+
+def optimizers(constraint):
+    return {"adam": optax.adam(0.05), "oc": fj.optimality_criteria(constraint, move=0.1)}
+
+
+# --- density filter ----------------------------------------------------------------------------
+@pytest.mark.parametrize("radius", [0.0, 1.0, 1.5, 2.5])
+def test_filter_rows_sum_to_one_and_reach_radius(radius):
+    design = small_design()
+    h = np.asarray(fj.DensityFilter(design, radius).matrix())
+    np.testing.assert_allclose(h.sum(axis=1), 1.0, atol=ROUND_OFF, err_msg="rows of H")
+    assert np.all(h >= 0.0), "filter weights must be non-negative"
+    mesh = design.mesh
+    scaled = design.design_centres() / np.array([mesh.dx, mesh.dy])
+    distance = np.linalg.norm(scaled[:, None] - scaled[None], axis=-1)
+    if radius <= 1.0:
+        np.testing.assert_array_equal(h, np.eye(len(h)), err_msg="H = I for r <= 1")
+    else:
+        assert np.all((h > 0) == (distance < radius)), "H_ei > 0 exactly for elements closer than r"
+
+
+def test_filter_transpose_is_the_adjoint():
+    filt = fj.DensityFilter(small_design(), 2.5)
+    x, g = jax.random.uniform(jax.random.PRNGKey(0), (2, filt.weights.shape[0]))
+    h = filt.matrix()
+    np.testing.assert_allclose(filt(x), h @ x, atol=ROUND_OFF, err_msg="H x")
+    np.testing.assert_allclose(filt.transpose(g), h.T @ g, atol=ROUND_OFF, err_msg="H^T g")
+    _, vjp = jax.vjp(filt, x)
+    np.testing.assert_allclose(vjp(g)[0], filt.transpose(g), atol=ROUND_OFF, err_msg="VJP of H x")
+    np.testing.assert_allclose(filt.volume_weights().mean(), 1.0, atol=ROUND_OFF, err_msg="mean of H^T 1")
+
+
+def test_filtered_gradient_matches_finite_differences():
+    filt = fj.DensityFilter(small_design(), 1.5)
+    n = filt.weights.shape[0]
+    psi, value_and_grad = surrogate(n)
+    fun = jax.jit(fj.filtered_objective(value_and_grad, filt))
+    x = jnp.asarray(np.random.default_rng(1).uniform(0.2, 0.9, n))
+    value, grad = fun(x)
+    np.testing.assert_allclose(value, psi(filt(x)), rtol=ROUND_OFF, err_msg="filtered value psi(H x)")
+    step = 1e-6
+    fd = jax.vmap(lambda e: (psi(filt(x + step * e)) - psi(filt(x - step * e))) / (2 * step))(jnp.eye(n))
+    np.testing.assert_allclose(grad, fd, rtol=FD_REL_TOL, atol=FD_REL_TOL * jnp.max(jnp.abs(fd)),
+                               err_msg="H^T grad against central differences of psi(H x)")
+
+
+@pytest.mark.parametrize("radius", [-0.5, float("nan")])
+def test_filter_rejects_negative_radius(radius):
+    with pytest.raises(ValueError, match="non-negative"):
+        fj.DensityFilter(small_design(), radius)
+
+
+# --- volume constraint --------------------------------------------------------------------------
+@pytest.mark.parametrize("radius", [0.0, 2.5])
+def test_projection_is_feasible_euclidean_and_batched(radius):
+    filt = fj.DensityFilter(small_design(), radius)
+    constraint = fj.VolumeConstraint(VOLUME, filter=filt)
+    ys = 0.5 + 0.8 * jax.random.normal(jax.random.PRNGKey(2), (5, filt.weights.shape[0]))
+    xs = jax.jit(jax.vmap(constraint.project))(ys)
+    fractions = jax.vmap(constraint.fraction)(xs)
+    physical = jnp.mean(jax.vmap(filt)(xs), axis=1)
+    again = jax.jit(jax.vmap(constraint.project))(xs)
+    c = np.asarray(filt.volume_weights())
+    for y, x, fraction, mean_phys, x_again in zip(*map(np.asarray, (ys, xs, fractions, physical, again)), strict=True):
+        assert abs(fraction - VOLUME) < VOLUME_TOL, "volume of the projection"
+        assert abs(mean_phys - VOLUME) < VOLUME_TOL, "physical volume mean(H x)"
+        assert np.all((x >= constraint.x_min) & (x <= 1.0)), "bounds of the projection"
+        # KKT of the Euclidean projection: x = clip(y - lambda c) for one multiplier lambda.
+        free = (x > constraint.x_min) & (x < 1.0)
+        lam = np.mean((y - x)[free] / c[free])
+        np.testing.assert_allclose(x, np.clip(y - lam * c, constraint.x_min, 1.0), atol=1e-12,
+                                   err_msg="projection is clip(y - lambda c)")
+        np.testing.assert_allclose(x_again, x, atol=1e-12, err_msg="projection is idempotent")
+
+
+@pytest.mark.parametrize("volume", [0.01, 0.0, -0.2, 1.0 + 1e-9, float("nan")])
+def test_volume_outside_range_is_refused(volume):
+    with pytest.raises(ValueError, match=r"\(x_min, 1\]"):
+        fj.VolumeConstraint(volume, x_min=0.01)
+
+
+def test_volume_one_is_allowed():
+    x = fj.VolumeConstraint(1.0).project(jnp.full(8, 0.3))
+    np.testing.assert_array_equal(x, 1.0)
+
+
+# --- optimality criteria ------------------------------------------------------------------------
+def reference_oc(x, g, volume, move, eta, x_min):
+    """Bendsøe–Sigmund OC with the multiplier solved to round-off by Brent's method (NumPy).
+
+    `B_e = (s - g_e) / lambda`, `s = max(0, max g)`: the textbook `-g_e / lambda` when `g <= 0`.
+    """
+    lower, upper = np.maximum(x_min, x - move), np.minimum(1.0, x + move)
+    b = max(0.0, g.max()) - g
+
+    def x_of(lam):
+        return np.clip(x * (b / lam) ** eta, lower, upper)
+
+    lam = scipy.optimize.brentq(lambda lam: x_of(lam).mean() - volume, 1e-20, 1e20, xtol=1e-300, rtol=1e-15)
+    return x_of(lam)
+
+
+@pytest.mark.parametrize("signs", ["compliance-like g < 0", "mixed signs"])
+def test_oc_matches_the_reference_update(signs):
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.2, 0.7, 40)
+    x = x - x.mean() + VOLUME
+    g = -rng.uniform(0.1, 2.0, 40) * 1e-5 if signs.startswith("compliance") else rng.normal(size=40) * 1e-5
+    constraint = fj.VolumeConstraint(VOLUME)
+    opt = fj.optimality_criteria(constraint, move=0.2, damping=0.5)
+    updates, _ = opt.update(jnp.asarray(g), opt.init(jnp.asarray(x)), jnp.asarray(x))
+    x_new = x + np.asarray(updates)
+    np.testing.assert_allclose(x_new, reference_oc(x, g, VOLUME, 0.2, 0.5, constraint.x_min), atol=1e-9,
+                               err_msg=f"OC update against NumPy/brentq ({signs})")
+    assert abs(x_new.mean() - VOLUME) < VOLUME_TOL, "OC meets the volume by itself"
+    if signs == "mixed signs":
+        top = np.argmax(g)
+        assert x_new[top] == pytest.approx(max(0.01, x[top] - 0.2), abs=ROUND_OFF), "largest dpsi/dx drops by m"
+
+
+def test_oc_fixed_point_is_a_kkt_point_with_either_sign_of_multiplier():
+    x = jnp.asarray(np.random.default_rng(5).uniform(0.2, 0.6, 30))
+    constraint = fj.VolumeConstraint(float(jnp.mean(x)))
+    opt = fj.optimality_criteria(constraint)
+    for multiplier in (-1e-3, 1e-3):  # dpsi/dx = -multiplier * c: every free element is stationary
+        updates, _ = opt.update(jnp.full(30, -multiplier), opt.init(x), x)
+        np.testing.assert_allclose(constraint.project(x + updates), x, atol=1e-9,
+                                   err_msg=f"OC moves a KKT point (multiplier {multiplier})")
+
+
+def test_oc_needs_the_design():
+    opt = fj.optimality_criteria(fj.VolumeConstraint(VOLUME))
+    with pytest.raises(ValueError, match="current design"):
+        opt.update(jnp.ones(4), opt.init(jnp.ones(4)))
+
+
+# --- the optax step -----------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["adam", "oc"])
+@pytest.mark.parametrize("radius", [0.0, 1.5])
+def test_volume_holds_after_every_update_and_psi_decreases(name, radius):
+    filt = fj.DensityFilter(small_design(), radius)
+    n = filt.weights.shape[0]
+    psi, value_and_grad = surrogate(n)
+    constraint = fj.VolumeConstraint(VOLUME, filter=filt)
+    optimizer = optimizers(constraint)[name]
+    step = fj.make_step(fj.filtered_objective(value_and_grad, filt), optimizer, constraint)
+    x = constraint.project(jnp.asarray(np.random.default_rng(4).uniform(0.1, 0.9, n)))
+    state = optimizer.init(x)
+    values = []
+    for _ in range(25):
+        x, state, info = step(x, state)
+        values.append(float(info.value))
+        assert abs(float(jnp.mean(filt(x))) - VOLUME) < VOLUME_TOL, "physical volume after an update"
+        assert abs(float(info.volume) - VOLUME) < VOLUME_TOL, "reported volume"
+        assert bool(jnp.all((x >= constraint.x_min) & (x <= 1.0))), "bounds after an update"
+    assert values[-1] < values[0], f"{name}: psi should decrease, got {values[0]} -> {values[-1]}"
+
+
+@pytest.mark.parametrize("name", ["adam", "oc"])
+def test_step_compiles_once(name):
+    n = small_design().n_design
+    _, value_and_grad = surrogate(n)
+    traces = []
+
+    def fun(x):
+        traces.append(None)  # a Python side effect: runs once per trace, never at run time
+        return value_and_grad(x)
+
+    constraint = fj.VolumeConstraint(VOLUME)
+    optimizer = optimizers(constraint)[name]
+    step = fj.make_step(fun, optimizer, constraint)
+    x = constraint.project(jnp.full(n, 0.5))
+    state = optimizer.init(x)
+    for _ in range(6):
+        x, state, _ = step(x, state)
+    assert len(traces) == 1, f"the step was traced {len(traces)} times"
+    assert step._cache_size() == 1
+
+
+# --- driver, log and checkpoints ----------------------------------------------------------------
+def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLUME, every=4):
+    filt = fj.DensityFilter(small_design(), 1.5)
+    _, value_and_grad = surrogate(filt.weights.shape[0])
+    constraint = fj.VolumeConstraint(volume, filter=filt)
+    return fj.optimize(
+        fj.filtered_objective(value_and_grad, filt), jnp.full(filt.weights.shape[0], volume),
+        optimizers(constraint)[name], constraint, iterations=iterations, directory=directory, resume=resume,
+        checkpoint_every=every, config={"optimizer": name, "volume": volume}, progress=False, callback=callback,
+    )
+
+
+class Interrupt(Exception):
+    pass
+
+
+def interrupt_at(k):
+    def callback(iteration, x, info):
+        if iteration == k:
+            raise Interrupt
+
+    return callback
+
+
+@pytest.mark.parametrize("name", ["adam", "oc"])
+def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name):
+    whole = run(tmp_path / "whole", name, 12)
+    with pytest.raises(Interrupt):  # after 6 steps; the last checkpoint holds 4
+        run(tmp_path / "cut", name, 12, callback=interrupt_at(5))
+    assert fj.load_checkpoint(tmp_path / "cut" / "checkpoint.npz").iteration == 4
+    resumed = run(tmp_path / "cut", name, 12, resume=True)
+    np.testing.assert_array_equal(resumed.x, whole.x, err_msg="final design")
+    for got, expected, quantity in zip(resumed.history, whole.history, ("psi", "volume", "max change"), strict=True):
+        np.testing.assert_array_equal(got, expected, err_msg=f"history of {quantity}")
+    for got, expected in zip(jax.tree.leaves(resumed.opt_state), jax.tree.leaves(whole.opt_state), strict=True):
+        np.testing.assert_array_equal(got, expected, err_msg="optimizer state")
+    assert (tmp_path / "cut" / "log.csv").read_text() == (tmp_path / "whole" / "log.csv").read_text()
+
+
+def test_log_and_checkpoint_record_the_run(tmp_path):
+    result = run(tmp_path, "oc", 6)
+    rows = (tmp_path / "log.csv").read_text().splitlines()
+    assert rows[0] == "iteration,psi,volume,max_change" and len(rows) == 7
+    log = np.loadtxt(tmp_path / "log.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(log[:, 0], np.arange(6))
+    np.testing.assert_array_equal(log[:, 1], result.history.value, err_msg="psi column")
+    assert np.all(np.abs(log[:, 2] - VOLUME) < VOLUME_TOL), "volume column"
+    checkpoint = fj.load_checkpoint(tmp_path / "checkpoint.npz")
+    assert checkpoint.iteration == 6 and checkpoint.config == {"optimizer": "oc", "volume": VOLUME}
+    np.testing.assert_array_equal(checkpoint.x, result.x)
+
+
+def test_resume_without_checkpoint_is_refused(tmp_path):
+    with pytest.raises(fj.CheckpointError, match="No checkpoint"):
+        run(tmp_path, "adam", 4, resume=True)
+
+
+def corrupt(path, how):
+    data = path.read_bytes()
+    if how == "truncated":
+        path.write_bytes(data[: len(data) // 2])
+    elif how == "garbage":
+        path.write_bytes(b"not a checkpoint" * 10)
+    elif how == "flipped byte":  # a byte inside the stored design: the zip CRC catches it
+        with zipfile.ZipFile(path) as z:
+            start = z.getinfo("x.npy").header_offset
+        name_length, extra_length = (int.from_bytes(data[start + i:start + i + 2], "little") for i in (26, 28))
+        offset = start + 30 + name_length + extra_length + 130  # past the .npy header, into the values
+        path.write_bytes(data[:offset] + bytes([data[offset] ^ 0xFF]) + data[offset + 1:])
+    elif how == "empty":
+        path.write_bytes(b"")
+
+
+@pytest.mark.parametrize("how", ["truncated", "garbage", "flipped byte", "empty"])
+def test_corrupt_checkpoint_is_refused(tmp_path, how):
+    run(tmp_path, "adam", 0)  # writes the checkpoint of iteration 0
+    corrupt(tmp_path / "checkpoint.npz", how)
+    with pytest.raises(fj.CheckpointError, match="corrupt"):
+        run(tmp_path, "adam", 8, resume=True)
+
+
+def test_resume_with_other_settings_or_optimizer_is_refused(tmp_path):
+    run(tmp_path, "adam", 0)
+    with pytest.raises(fj.CheckpointError, match="differ"):
+        run(tmp_path, "adam", 8, resume=True, volume=0.5)
+    checkpoint = fj.load_checkpoint(tmp_path / "checkpoint.npz")
+    with pytest.raises(fj.CheckpointError, match="another optimizer"):
+        fj.restore_opt_state(checkpoint.opt_state_leaves, optax.sgd(0.1).init(jnp.zeros(4)))
+
+
+def test_new_run_does_not_overwrite_a_checkpoint(tmp_path):
+    run(tmp_path, "adam", 0)
+    with pytest.raises(fj.CheckpointError, match="already holds a run"):
+        run(tmp_path, "adam", 4)
+
+
+@pytest.mark.parametrize("crash_in", ["savez", "replace"])
+def test_crash_while_writing_keeps_the_previous_checkpoint(tmp_path, monkeypatch, crash_in):
+    path = tmp_path / "checkpoint.npz"
+    old = fj.Checkpoint(3, np.full(5, 0.25), (np.arange(3.0),), fj.History(*np.ones((3, 3))), {"a": 1})
+    fj.save_checkpoint(path, old)
+    new = old._replace(iteration=4, x=np.full(5, 0.75), history=fj.History(*np.ones((3, 4))))
+
+    def savez_then_crash(f, **arrays):
+        f.write(b"PK\x03\x04 half of a zip")  # a partial write, then the process dies
+        raise OSError("simulated crash during the write")
+
+    def crash(*args):
+        raise OSError("simulated crash before the rename")
+
+    if crash_in == "savez":
+        monkeypatch.setattr(np, "savez", savez_then_crash)
+    else:
+        monkeypatch.setattr(os, "replace", crash)
+    with pytest.raises(OSError, match="simulated crash"):
+        fj.save_checkpoint(path, new)
+    monkeypatch.undo()
+    kept = fj.load_checkpoint(path)
+    assert kept.iteration == 3, "the previous checkpoint must survive a failed write"
+    np.testing.assert_array_equal(kept.x, old.x)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.npz"], "no temporary file left behind"
+
+
+# --- command line -------------------------------------------------------------------------------
+def test_cli_resume_errors_are_reported(tmp_path, capsys):
+    assert main(["optimize", "slider-crank", "--resume", str(tmp_path)]) == 2
+    assert "No checkpoint" in capsys.readouterr().err
+    (tmp_path / "checkpoint.npz").write_bytes(b"garbage")
+    assert main(["optimize", "slider-crank", "--resume", str(tmp_path)]) == 2
+    assert "corrupt" in capsys.readouterr().err
+    assert main(["optimize", "slider-crank", "--resume", str(tmp_path), "--out", str(tmp_path / "x")]) == 2
+    assert "different directories" in capsys.readouterr().err
+
+
+TINY = ["slider-crank", "--nx", "8", "--ny", "2", "--modes", "2", "--t1", "0.2", "--rtol", "1e-6", "--atol", "1e-12",
+        "--optimizer", "adam", "--lr", "0.05", "--method", "adjoint", "--no-progress"]
+
+
+def test_psi_decreases_on_a_tiny_real_case_through_the_cli(tmp_path):
+    # atol 1e-12: the elastic coordinates of a 0.2 s run-up are tiny, and with atol 1e-10 the
+    # gradient of the discrete solution is off by 70 % in some entries.
+    assert main(["optimize", *TINY, "--iters", "3", "--checkpoint-every", "2", "--out", str(tmp_path)]) == 0
+    for name in ("log.csv", "checkpoint.npz", "design.npz", "design.png", "convergence.png"):
+        assert (tmp_path / name).is_file(), f"{name} was not written"
+    log = np.loadtxt(tmp_path / "log.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(log[:, 0], np.arange(3))
+    assert log[-1, 1] < log[0, 1], f"psi should decrease over the run: {log[:, 1]}"
+    assert np.all(np.abs(log[:, 2] - 0.5) < VOLUME_TOL), "volume after every update"
+    saved = np.load(tmp_path / "design.npz")
+    assert abs(saved["x_phys"].mean() - 0.5) < VOLUME_TOL, "physical volume of the final design"
+    assert fj.load_checkpoint(tmp_path / "checkpoint.npz").iteration == 3
+
+
+@pytest.mark.slow
+def test_cli_resume_continues_the_run(tmp_path):
+    assert main(["optimize", *TINY, "--iters", "2", "--out", str(tmp_path)]) == 0
+    first = (tmp_path / "log.csv").read_text()
+    assert main(["optimize", "slider-crank", "--iters", "4", "--resume", str(tmp_path), "--no-progress"]) == 0
+    log = np.loadtxt(tmp_path / "log.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(log[:, 0], np.arange(4))
+    assert (tmp_path / "log.csv").read_text().startswith(first), "a resumed run keeps the logged steps"
+    assert json.loads(str(np.load(tmp_path / "design.npz")["config"]))["nx"] == 8, "settings from the checkpoint"
+    assert main(["optimize", "slider-crank", "--iters", "5", "--resume", str(tmp_path), "--volume", "0.4"]) == 2
