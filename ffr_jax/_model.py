@@ -190,12 +190,14 @@ def _newton(model: MinimalModel, t, y, scene: Scene):
         return (k < model.newton_iterations) & (size > model.newton_tol * (1.0 + jnp.max(jnp.abs(y_d))))
 
     y_d, _, _ = jax.lax.while_loop(cond, body, (guess, jnp.asarray(jnp.inf, y.dtype), 0))
-    c_d = jax.jacfwd(residual)(y_d)
+    # Judge regularity where Newton ended, or at its start if it blew up; a NaN there (a NaN guess)
+    # is a convergence failure, not a singular partition.
+    c_d = jax.jacfwd(residual)(jnp.where(jnp.all(jnp.isfinite(y_d)), y_d, guess))
     scale = 1.0 + jnp.max(jnp.abs(model.assemble(y, y_d)))
-    hadamard = jnp.abs(jnp.linalg.det(c_d)) / jnp.prod(jnp.linalg.norm(c_d, axis=1))
+    hadamard = jnp.abs(jnp.linalg.det(c_d)) / jnp.maximum(jnp.prod(jnp.linalg.norm(c_d, axis=1)), 1e-300)
     y_d = eqx.error_if(
         y_d,
-        ~(hadamard > 1e-9),
+        hadamard <= 1e-9,
         "The coordinate partition became singular: the constraint Jacobian with respect to the "
         "dependent coordinates lost rank along the motion (e.g. a linkage at a dead point). "
         "Choose another partition (MinimalModel(partition=...)), or stop the simulation earlier.",
