@@ -111,7 +111,7 @@ def load_checkpoint(path) -> Checkpoint:
         iteration = int(arrays["iteration"])
         history = History(arrays["history_value"], arrays["history_volume"], arrays["history_change"])
         if not all(len(h) == iteration for h in history):
-            raise ValueError(f"the history has {len(history)} entries for {iteration} iterations")
+            raise ValueError(f"the history has {[len(h) for h in history]} entries for {iteration} iterations")
         leaves = tuple(arrays[f"opt_state_{i}"] for i in range(int(arrays["n_opt_state"])))
         config = json.loads(str(arrays["config"]))
         x = arrays["x"]

@@ -112,11 +112,11 @@ def _run(args: argparse.Namespace) -> int:
     h = result.history
     np.savez(directory / "design.npz", x=np.asarray(result.x), x_phys=x_phys, psi=h.value, volume=h.volume,
              max_change=h.change, config=np.array(json.dumps(s, sort_keys=True)))
-    ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, V = {s['volume']}, {len(h)} steps")
+    ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, V = {s['volume']}, {h.steps} steps")
     ax.figure.savefig(directory / "design.png", dpi=150)
     ax = fj.plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)
-    if len(h):
-        print(f"psi {h.value[0]:.6e} -> {h.value[-1]:.6e} over {len(h)} steps, volume {h.volume[-1]:.6f}")
+    if h.steps:
+        print(f"psi {h.value[0]:.6e} -> {h.value[-1]:.6e} over {h.steps} steps, volume {h.volume[-1]:.6f}")
     print(f"wrote {directory}/design.npz, design.png, convergence.png, log.csv, {CHECKPOINT}")
     return 0

@@ -95,7 +95,7 @@ def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constra
         log = open(directory / LOG, "a")
     step = make_step(fun, optimizer, constraint)
     try:
-        for k in range(len(history), iterations):
+        for k in range(history.steps, iterations):
             start = time.perf_counter()
             x_new, opt_state, info = step(x, opt_state)
             value, volume, change = float(info.value), float(info.volume), float(info.change)

@@ -26,5 +26,7 @@ class History(NamedTuple):
             np.append(self.value, value), np.append(self.volume, volume), np.append(self.change, change)
         )
 
-    def __len__(self) -> int:
+    @property
+    def steps(self) -> int:
+        """The number of recorded steps."""
         return len(self.value)

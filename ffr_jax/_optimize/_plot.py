@@ -45,7 +45,7 @@ def plot_history(history: History, ax=None):
 
     if ax is None:
         ax = Figure(figsize=(6, 3.5), layout="constrained").subplots()
-    k = np.arange(len(history))
+    k = np.arange(history.steps)
     ax.plot(k, history.value, "C0.-", label="psi")
     if np.all(history.value > 0):
         ax.set_yscale("log")
