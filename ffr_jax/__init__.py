@@ -6,7 +6,7 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from . import cases as cases
-from ._api import objective as objective, simulate_case as simulate_case
+from ._api import objective as objective, simulate_case as simulate_case, value_and_grad as value_and_grad, value_and_grad_scene as value_and_grad_scene
 from ._body_data import BodyData as BodyData, flexible_body_data as flexible_body_data, rigid_body_data as rigid_body_data
 from ._case import FlexibleRodCase as FlexibleRodCase
 from ._fe import RodMesh as RodMesh, mass_matrix as mass_matrix, stiffness_matrix as stiffness_matrix
@@ -28,6 +28,12 @@ from ._scene._prescribed_point import CrankPin as CrankPin
 from ._scene._revolute import Revolute as Revolute
 from ._scene._scene import Scene as Scene
 from ._scene._spring_damper import SpringDamper as SpringDamper
+from ._sensitivity._adjoint import Adjoint as Adjoint
+from ._sensitivity._autodiff import Autodiff as Autodiff
+from ._sensitivity._backsolve import Backsolve as Backsolve
+from ._sensitivity._base import AbstractSensitivity as AbstractSensitivity
+from ._sensitivity._direct import Direct as Direct
+from ._sensitivity._finite_differences import FiniteDifferences as FiniteDifferences
 from ._simp import SIMP as SIMP, RodDesign as RodDesign
 from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state, simulate as simulate
 from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint

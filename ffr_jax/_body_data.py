@@ -81,7 +81,7 @@ def rigid_body_data(mass, first_moment, inertia, marker_positions) -> BodyData:
 
 def _rotate_nodewise(v):
     """`I~ v` node by node: `(u_x, u_y) -> (-u_y, u_x)` for stacked vectors `(2 n, ...)`."""
-    pairs = v.reshape((-1, 2) + v.shape[1:])
+    pairs = v.reshape((v.shape[0] // 2, 2) + v.shape[1:])
     return jnp.stack([-pairs[:, 1], pairs[:, 0]], axis=1).reshape(v.shape)
 
 
@@ -107,7 +107,7 @@ def flexible_body_data(mesh: RodMesh, mass_matrix, stiffness_matrix, modes, mark
     m_c = mass_matrix @ c
     m_e = mass_matrix @ e
     idx = jnp.asarray(marker_nodes, dtype=int)
-    marker_modes = modes.reshape(-1, 2, modes.shape[1])[idx]
+    marker_modes = modes.reshape(mesh.n_nodes, 2, modes.shape[1])[idx]
     return BodyData(
         mass=e[:, 0] @ m_e[:, 0],
         first_moment=e.T @ m_c,

@@ -117,8 +117,8 @@ class RodMesh(eqx.Module):
     def dy(self) -> float:
         return self.height / self.ny
 
-    def node(self, i: int, j: int) -> int:
-        """Global index of node `(i, j)`."""
+    def node(self, i, j):
+        """Global index of node `(i, j)` (integers or integer arrays)."""
         return i * (self.ny + 1) + j
 
     @property

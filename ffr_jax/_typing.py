@@ -1,8 +1,10 @@
 """jaxtyping aliases used across the package (checked in tests through pytest `addopts`)."""
 
+import numpy as np
 from jaxtyping import Array, Float
 
-Design = Float[Array, " n_design"]
+# A design may come from the user as a NumPy array; internal arrays are JAX arrays.
+Design = Float[Array | np.ndarray, " n_design"]
 ElementField = Float[Array, " n_elements"]
 Matrix = Float[Array, "n n"]
 Modes = Float[Array, "n_dof n_modes"]

@@ -209,12 +209,6 @@ def test_rigid_body_behaves_like_flexible_without_modes(rigid):
                                    rtol=BRUTE_RTOL, atol=1e-15, err_msg=f"rigid marker {marker}")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=ZeroDivisionError,
-    reason="library bug: flexible_body_data reshapes (-1, 2, n_q) with n_q = 0 (_body_data.py "
-    "marker_modes and _rotate_nodewise); use explicit node counts. Remove this mark once fixed.",
-)
 def test_flexible_body_data_with_zero_modes_is_rigid_body_data(rigid):
     case, x, no_modes, _, data = rigid
     k, m = case.fe_matrices(x)
