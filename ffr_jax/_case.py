@@ -10,10 +10,12 @@ import numpy as np
 
 from ._body_data import BodyData, flexible_body_data
 from ._fe import RodMesh, mass_matrix, stiffness_matrix
+from ._geometric_stiffness import centrifugal_geometric_stiffness
 from ._model import MinimalModel
 from ._modes import ModalBasis, hinged_modes
 from ._objective._base import AbstractIntegrand
 from ._scene._scene import Scene
+from ._scene._stiffening import GeometricStiffening
 from ._simp import SIMP, RodDesign
 from ._typing import Design
 
@@ -91,8 +93,24 @@ class FlexibleRodCase(eqx.Module):
         return flexible_body_data(self.mesh, m, k, basis.modes, self.marker_nodes)
 
     def scene(self, x: Design) -> Scene:
-        """The parameter pytree `p(x)`: the scene with the rod's body data for design `x`."""
-        return self.with_body_data(self.body_data(x))
+        """The parameter pytree `p(x)`: the scene with the rod's body data for design `x`.
+
+        Design-dependent data of the rod's effects ([`GeometricStiffening`][]'s `K_geo`) are
+        recomputed for `x` as well; a scene without such an effect computes nothing more.
+        """
+        stiffening = [i for i, f in enumerate(self.scene_template.forces)
+                      if isinstance(f, GeometricStiffening) and f.body == self.body]
+        if not stiffening:
+            return self.with_body_data(self.body_data(x))
+        x = self.design.check(x)
+        youngs = self.material.youngs(self.design.element_densities(x))
+        k, m = self.fe_matrices(x)
+        modes = hinged_modes(k, m, self.fixed_dofs, self.n_modes).modes
+        scene = self.with_body_data(flexible_body_data(self.mesh, m, k, modes, self.marker_nodes))
+        k_geo = centrifugal_geometric_stiffness(self.mesh, k, m, youngs, modes, self.fixed_dofs)
+        for i in stiffening:
+            scene = eqx.tree_at(lambda s: s.forces[i].modal_geometric_stiffness, scene, k_geo)
+        return scene
 
     def with_body_data(self, data: BodyData) -> Scene:
         return eqx.tree_at(lambda s: s.bodies[self.body].data, self.scene_template, data)

@@ -2,6 +2,7 @@
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -99,8 +100,13 @@ def simulate(
     solver = diffrax.Tsit5() if solver is None else solver
     adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
 
+    # Only the arrays of the scene travel as `args` (the rest is closed over): diffrax's
+    # BacksolveAdjoint cannot carry empty tuples such as `Scene.forces = ()` through its state.
+    dynamic, static = eqx.partition(scene, eqx.is_inexact_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dynamic)
+
     def field(t, state, args):
-        scene_ = args
+        scene_ = eqx.combine(jax.tree_util.tree_unflatten(treedef, args), static)
         y_r, z_r = model.state(t, state[0], state[1], scene_)
         zdot = model.accelerations(t, y_r, z_r, scene_)
         if integrand is None:
@@ -118,7 +124,7 @@ def simulate(
         t1,
         dt0,
         state0,
-        args=scene,
+        args=leaves,
         saveat=saveat,
         stepsize_controller=controller,
         max_steps=max_steps,

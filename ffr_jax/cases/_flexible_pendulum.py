@@ -1,0 +1,82 @@
+"""A flexible rod swinging about a ground pivot under gravity (an open tree, no kinematic loop)."""
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._case import FlexibleRodCase
+from .._fe import RodMesh
+from .._model import MinimalModel, choose_partition
+from .._objective._compliance import Compliance
+from .._scene._body import Body
+from .._scene._damping import ModalDamping
+from .._scene._gravity import Gravity
+from .._scene._ground_revolute import GroundRevolute
+from .._scene._scene import Scene
+from .._simp import SIMP, RodDesign
+from ._slider_crank import rod_template
+
+
+def flexible_pendulum(
+    nx: int = 100,
+    ny: int = 6,
+    n_modes: int = 6,
+    t1: float = 2.0,
+    *,
+    gravity: bool = True,
+    initial_angle: float = -np.pi / 4,
+    damping_ratio: float | None = None,
+    g: float = 9.81,
+    length: float = 1.0,
+    height: float = 0.06,
+    thickness: float = 0.01,
+    material: SIMP = SIMP(),
+) -> FlexibleRodCase:
+    """A flexible rod pinned at its point A to the ground, released from rest at `initial_angle`.
+
+    The rod is the one of REFERENCE_CASE §1–2 (Q4 mesh, SIMP design, hinged–hinged modes, frame
+    origin at A with the x-axis through B). A `GroundRevolute` keeps A at the inertial origin;
+    with `gravity` the rod swings under `g = (0, -g)`. Coordinates `y_r = (R_x, R_y, theta, q)`,
+    independent `y = (theta, q)`, dependent `(R_x, R_y)` (exactly zero, since A has no elastic
+    displacement). Initial state: `R = 0`, `theta = initial_angle` (`-pi/2` hangs straight down),
+    `q = 0`, at rest. The objective is the integral compliance (paper eq. 49).
+
+    **Arguments:**
+    - `nx`, `ny`: mesh of the rod; `n_modes`: retained modes; `t1`: end time.
+    - `gravity`: add [`Gravity`][] (a static choice: without it the scene holds no gravity at all).
+    - `initial_angle`: `theta(0)` in rad, measured from the inertial x-axis.
+    - `damping_ratio`: if given, [`ModalDamping`][] of the rod with this ratio.
+    - `g`: magnitude of the gravitational acceleration; `length`, `height`, `thickness`: rod.
+    - `material`: the SIMP law.
+
+    **Returns:** a [`FlexibleRodCase`][].
+    """
+    if t1 <= 0:
+        raise ValueError(f"t1 must be positive, got {t1}.")
+    mesh = RodMesh(nx, ny, length, height, thickness)
+    design = RodDesign(mesh, material)
+    forces = ()
+    if gravity:
+        forces += (Gravity((0.0, -float(g))),)
+    if damping_ratio is not None:
+        forces += (ModalDamping(body=0, ratio=damping_ratio),)
+    scene = Scene(
+        bodies=(Body("rod", rod_template(design, n_modes)),),
+        constraints=(GroundRevolute(body=0, marker=0, point=(0.0, 0.0)),),
+        forces=forces,
+    )
+    y_r0 = jnp.zeros(scene.n_coordinates).at[2].set(float(initial_angle))
+    z_r0 = jnp.zeros(scene.n_coordinates)
+    partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=(0, 1))
+    model = MinimalModel(partition=partition, reference_dependent=y_r0[np.asarray(partition.dependent)])
+    return FlexibleRodCase(
+        design=design,
+        n_modes=n_modes,
+        body=0,
+        scene_template=scene,
+        model=model,
+        integrand=Compliance(body=0),
+        t0=0.0,
+        t1=float(t1),
+        y_r0=y_r0,
+        z_r0=z_r0,
+    )
