@@ -99,6 +99,14 @@ def main():
     print(table)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(table)
+    if (args.nx, args.ny, args.modes) == (100, 6, 6):
+        from _results import write_section
+
+        command = "python benchmarks/bench_fe.py" + (f" --runs {args.runs}" if args.runs != 7 else "")
+        flags = os.environ.get("XLA_FLAGS")
+        command = (f"XLA_FLAGS={flags} " if flags else "") + command
+        write_section("FE stage: assembly, modal reduction, body data (reference rod)",
+                      f"Command: `{command}` (details: `benchmarks/results/fe.md`)\n\n" + "\n".join(lines[2:]) + "\n")
 
 
 if __name__ == "__main__":

@@ -5,8 +5,17 @@
 and root conftest files load before that hook.
 """
 
+import os
+
 import jax
 
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
+# XLA compilation dominates the suite's run time (diffrax solves and their gradients take tens of
+# seconds to compile); JAX's persistent cache keeps compiled programs between runs on one machine.
+# FFR_JAX_TEST_CACHE= (empty) turns it off.
+_cache = os.environ.get("FFR_JAX_TEST_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "ffr_jax", "xla"))
+if _cache:
+    jax.config.update("jax_compilation_cache_dir", _cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)

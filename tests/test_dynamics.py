@@ -196,7 +196,7 @@ def random_state(case, scene, seed):
     y_ref = model.split(case.y_r0)[0]
     y = y_ref + jnp.asarray(rng.normal(scale=0.3, size=f))
     z = jnp.asarray(rng.normal(scale=3.0, size=f))
-    y_r, z_r = model.state(t, y, z, scene)
+    y_r, z_r = jax.jit(lambda t, y, z: model.state(t, y, z, scene))(t, y, z)
     return t, y, z, y_r, z_r
 
 
@@ -214,9 +214,12 @@ def test_mass_matrix_and_forces_equal_mesh_lagrangian(system, seed):
     y_r = jnp.asarray(rng.normal(scale=0.5, size=n))
     z_r = jnp.asarray(rng.normal(scale=3.0, size=n))
     t = jnp.asarray(0.1)
-    assert_close_relative(scene.mass_matrix(y_r), mesh.mass_matrix(y_r, z_r), EOM_RTOL, f"{system}: mass matrix")
-    assert_close_relative(-scene.applied_forces(t, y_r, z_r), mesh.lagrange_forces(y_r, z_r), EOM_RTOL,
-                          f"{system}: quadratic-velocity, elastic and applied forces")
+    # One compiled program per system (op-by-op evaluation of these derivatives is slow).
+    terms = jax.jit(lambda t, y_r, z_r: (scene.mass_matrix(y_r), mesh.mass_matrix(y_r, z_r),
+                                         -scene.applied_forces(t, y_r, z_r), mesh.lagrange_forces(y_r, z_r)))
+    m_model, m_mesh, f_model, f_mesh = terms(t, y_r, z_r)
+    assert_close_relative(m_model, m_mesh, EOM_RTOL, f"{system}: mass matrix")
+    assert_close_relative(f_model, f_mesh, EOM_RTOL, f"{system}: quadratic-velocity, elastic and applied forces")
 
 
 @pytest.mark.parametrize("system", ["pendulum", "slider_crank", "four_bar", "rigid_slider_crank"])
@@ -224,13 +227,19 @@ def test_minimal_accelerations_equal_lagrange_multiplier_dae(system):
     """Coordinate partitioning gives the accelerations of the Lagrange-multiplier system of the mesh model."""
     case, scene, mesh = SYSTEMS[system]()
     model = case.model
-    for seed in (0, 1):
-        t, y, z, y_r, z_r = random_state(case, scene, seed)
+
+    @jax.jit
+    def accelerations(t, y, z, y_r, z_r):
         a_dae, _ = mesh.dae_accelerations(t, y_r, z_r)
         zdot = model.accelerations(t, y_r, z_r, scene)
-        assert_close_relative(zdot, model.split(a_dae)[0], EOM_RTOL, f"{system}: independent accelerations")
         # The redundant accelerations follow by differentiating the model's velocity map along the motion.
         zdot_r = jax.jvp(lambda tt, yy, zz: model.state(tt, yy, zz, scene)[1], (t, y, z), (jnp.ones_like(t), z, zdot))[1]
+        return a_dae, zdot, zdot_r
+
+    for seed in (0, 1):
+        t, y, z, y_r, z_r = random_state(case, scene, seed)
+        a_dae, zdot, zdot_r = accelerations(t, y, z, y_r, z_r)
+        assert_close_relative(zdot, model.split(a_dae)[0], EOM_RTOL, f"{system}: independent accelerations")
         assert_close_relative(zdot_r, a_dae, EOM_RTOL, f"{system}: redundant accelerations")
 
 
@@ -246,7 +255,7 @@ def trajectory(system, rtol, atol, n_save):
     run = jax.jit(lambda s: ffr_jax.simulate(case.model, s, case.t0, case.t1, case.y_r0, case.z_r0, rtol=rtol,
                                              atol=atol, ts=ts, jump_ts=case.jump_ts))
     traj = run(scene)
-    states = jax.vmap(lambda t, y, z: case.model.state(t, y, z, scene))(traj.ts, traj.ys, traj.zs)
+    states = jax.jit(jax.vmap(lambda t, y, z: case.model.state(t, y, z, scene)))(traj.ts, traj.ys, traj.zs)
     return traj, states
 
 
@@ -254,13 +263,13 @@ def test_pendulum_conserves_energy():
     """Undamped, undriven flexible pendulum under gravity: `T + V` constant over 2 s."""
     case, scene, _ = pendulum()
     traj, (y_r, z_r) = trajectory("pendulum", 1e-10, 1e-12, 21)
-    energy = jax.vmap(lambda t, y, z: _energy(scene, t, y, z))(traj.ts, y_r, z_r)
+    energy = jax.jit(jax.vmap(lambda t, y, z: _energy(scene, t, y, z)))(traj.ts, y_r, z_r)
     mass = float(scene.bodies[0].data.mass)
     scale = mass * 9.81 * case.mesh.length  # the energy exchanged in the swing is of this order
     # Released from rest at -45 deg, the centre of mass (at L/2) drops by (1 - sin 45 deg) L/2 when
     # the rod passes the vertical: a rigid rod's kinetic energy there. The saved states sample it.
     swing = scale * 0.5 * (1.0 - np.sin(np.pi / 4))
-    kinetic = jax.vmap(scene.kinetic_energy)(y_r, z_r)
+    kinetic = jax.jit(jax.vmap(scene.kinetic_energy))(y_r, z_r)
     assert 0.8 * swing < float(jnp.max(kinetic)) < 1.01 * swing, "the pendulum should swing through the vertical"
     drift = float(jnp.max(jnp.abs(energy - energy[0])))
     assert drift <= ENERGY_RTOL * scale, f"T + V drifted by {drift:.3e} (scale {scale:.3e})"
@@ -285,7 +294,7 @@ def test_driver_power_equals_energy_rate():
         c_t = jax.jacfwd(scene.constraint_residual, argnums=0)(t, y_r)
         return de_dt, lam @ c_t
 
-    de_dt, power = jax.vmap(rates)(traj.ts, traj.ys, traj.zs, y_r, z_r)
+    de_dt, power = jax.jit(jax.vmap(rates))(traj.ts, traj.ys, traj.zs, y_r, z_r)
     assert float(jnp.max(jnp.abs(power))) > 1.0, "the driver should do work during the run-up"
     assert_close_relative(de_dt, power, POWER_RTOL, "d(T + V)/dt vs. driver power")
 
@@ -297,8 +306,8 @@ def test_constraints_hold_along_trajectories(system, rtol, atol, n_save):
     """Position and velocity constraints hold at every saved state of a simulation."""
     case, scene, _ = SYSTEMS[system]()
     traj, (y_r, z_r) = trajectory(system, rtol, atol, n_save)
-    pos = jax.vmap(scene.constraint_residual)(traj.ts, y_r)
-    vel = jax.vmap(lambda t, y, z: case.model.velocity_constraint(t, y, z, scene))(traj.ts, y_r, z_r)
+    pos = jax.jit(jax.vmap(scene.constraint_residual))(traj.ts, y_r)
+    vel = jax.jit(jax.vmap(lambda t, y, z: case.model.velocity_constraint(t, y, z, scene)))(traj.ts, y_r, z_r)
     assert float(jnp.max(jnp.abs(pos))) <= CONSTRAINT_TOL, f"{system}: position constraints {jnp.max(jnp.abs(pos))}"
     assert float(jnp.max(jnp.abs(vel))) <= CONSTRAINT_TOL, f"{system}: velocity constraints {jnp.max(jnp.abs(vel))}"
 
@@ -354,7 +363,7 @@ def test_rigid_slider_crank_matches_closed_form_kinematics():
     assert float(jnp.max(jnp.abs(y_r[:, 7]))) <= KINEMATICS_TOL, "the slider leaves the x-axis"
     # The same case simulates (its minimal state is empty) and reproduces the motion.
     traj = ffr_jax.simulate(model, scene, case.t0, case.t1, case.y_r0, case.z_r0, ts=ts[::50], jump_ts=case.jump_ts)
-    y_sim = jax.vmap(lambda t, y: model.positions(t, y, scene))(traj.ts, traj.ys)
+    y_sim = jax.jit(jax.vmap(lambda t, y: model.positions(t, y, scene)))(traj.ts, traj.ys)
     np.testing.assert_allclose(y_sim, y_r[::50], atol=KINEMATICS_TOL)
 
 
@@ -367,5 +376,5 @@ def test_free_rigid_slider_crank_follows_closed_form_kinematics():
     phi = y_r[:, 2]
     expected = eps * jnp.cos(phi) + jnp.sqrt(length**2 - (eps * jnp.sin(phi)) ** 2)
     assert float(jnp.max(jnp.abs(y_r[:, 6] - expected))) <= KINEMATICS_TOL
-    energy = jax.vmap(lambda t, y, z: _energy(scene, t, y, z))(traj.ts, y_r, z_r)
+    energy = jax.jit(jax.vmap(lambda t, y, z: _energy(scene, t, y, z)))(traj.ts, y_r, z_r)
     assert float(jnp.max(jnp.abs(energy - energy[0]))) <= ENERGY_RTOL * float(energy[0]), "spring system energy"
