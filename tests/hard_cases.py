@@ -1,0 +1,202 @@
+"""The hard members of the slider–crank family (issue 6) and the checks run on them.
+
+Shared by `tests/test_hard_cases.py` (small, fast members) and `benchmarks/bench_hard_cases.py`
+(the whole table, slow members included), so that both check exactly the same thing.
+
+Compilation dominates the cost of a gradient on a small case (tens of seconds per method, a
+fraction of a second per run), and it depends only on the *structure* of a case: mesh size,
+number of modes, time span, partition. [`variant`][] therefore builds a case with other array
+values (crank radius, crank speed, initial state) inside the static structure of a base case, so
+that one compiled gradient serves every variant of the same size.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg
+
+import ffr_jax
+
+# Forward tolerances of the finite-difference evaluations: two decades below the gradient's
+# forward tolerance (1e-10), so that the difference quotient is not dominated by solver noise.
+FD_RTOL, FD_ATOL = 1e-12, 1e-14
+
+
+@eqx.filter_jit
+def adjoint_value_and_grad(case, x):
+    """`(psi, grad psi)` by the paper's adjoint method, compiled once per case structure."""
+    return ffr_jax.value_and_grad(case, x, "adjoint")
+
+
+@eqx.filter_jit
+def tight_objective(case, x):
+    """`psi(x)` at the tight tolerances of the finite-difference checks, compiled once per structure."""
+    return ffr_jax.objective(case, x, rtol=FD_RTOL, atol=FD_ATOL)
+
+
+def variant(base: ffr_jax.FlexibleRodCase, other: ffr_jax.FlexibleRodCase) -> ffr_jax.FlexibleRodCase:
+    """The array values of `other` (crank radius and law, initial state, templates) in the static
+    structure of `base`, so that functions compiled for `base` run `other` without recompiling.
+
+    Raises `ValueError` when the two differ in anything but array values that matters: array
+    shapes, the coordinate partition, the time span, the mesh or the number of modes.
+    """
+    for name in ("n_modes", "t0", "t1", "jump_ts"):
+        if getattr(base, name) != getattr(other, name):
+            raise ValueError(f"variant: {name} differs ({getattr(base, name)} vs {getattr(other, name)}).")
+    if base.mesh != other.mesh or base.model.partition != other.model.partition:
+        raise ValueError("variant: the mesh or the coordinate partition differs; build a separate case.")
+    base_leaves, treedef = jax.tree_util.tree_flatten(eqx.filter(base, eqx.is_array))
+    other_leaves = jax.tree_util.tree_leaves(eqx.filter(other, eqx.is_array))
+    if [a.shape for a in base_leaves] != [b.shape for b in other_leaves]:
+        raise ValueError("variant: array shapes differ; build a separate case.")
+    arrays = jax.tree_util.tree_unflatten(treedef, other_leaves)
+    return eqx.combine(arrays, eqx.filter(base, eqx.is_array, inverse=True))
+
+
+# --- designs ---------------------------------------------------------------------------------------
+
+
+def _free_eigenpairs(case, x):
+    k, m = (np.asarray(a) for a in case.fe_matrices(jnp.asarray(x)))
+    free = np.setdiff1d(np.arange(case.mesh.n_dof), case.fixed_dofs)
+    lam, vec = scipy.linalg.eigh(k[np.ix_(free, free)], m[np.ix_(free, free)])
+    full = np.zeros((case.mesh.n_dof, lam.size))
+    full[free] = vec
+    return lam, full
+
+
+def _is_axial(case, mode) -> bool:
+    """Whether a mode of a design symmetric about the rod's mid-line is symmetric (axial) rather
+    than antisymmetric (bending): `u_x` mirrored across the mid-line keeps its sign."""
+    mesh = case.mesh
+    ux = mode[0::2].reshape(mesh.nx + 1, mesh.ny + 1)
+    return np.linalg.norm(ux - ux[:, ::-1]) < np.linalg.norm(ux + ux[:, ::-1])
+
+
+def crossing_design(case, low: float = 0.2, high: float = 0.95, tol: float = 1e-13):
+    """A design whose first axial eigenvalue equals a bending eigenvalue inside the retained set.
+
+    The family `x(s) = (1 - s) 0.5 + s ramp`, with `ramp` rising linearly along the rod from
+    `low` at A to `high` at B and equal rows (symmetric about the mid-line), lowers the first
+    axial frequency through a bending one; symmetric and antisymmetric modes do not interact, so
+    the two eigenvalues truly cross (no veering). Bisection on `s` finds the crossing.
+
+    **Returns:** `(x, gap)`, the design and the relative gap of the crossing pair there, and the
+    index `(k, k+1)` of the pair in the retained set.
+    """
+    columns = np.linspace(0.0, 1.0, case.mesh.nx - 2)
+    ramp = low + (high - low) * columns
+
+    def design(s):
+        return np.tile((1 - s) * 0.5 + s * ramp, case.mesh.ny)
+
+    def axial_index(s):
+        lam, vec = _free_eigenpairs(case, design(s))
+        axial = [k for k in range(case.n_modes + 1) if _is_axial(case, vec[:, k])]
+        if not axial:
+            raise ValueError("crossing_design: no axial mode among the lowest n_modes + 1 for this case.")
+        return lam, axial[0]
+
+    lo, hi = 0.0, 1.0
+    start, end = axial_index(lo)[1], axial_index(hi)[1]
+    if end >= start:
+        raise ValueError("crossing_design: the axial eigenvalue does not move down through a bending one.")
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        if axial_index(mid)[1] == start:
+            lo = mid
+        else:
+            hi = mid
+    lam, a = axial_index(lo)
+    pair = (a - 1, a)
+    if pair[1] >= case.n_modes:
+        raise ValueError(f"crossing_design: the crossing pair {pair} is not inside the {case.n_modes} retained modes.")
+    gap = (lam[pair[1]] - lam[pair[0]]) / lam[pair[1]]
+    return jnp.asarray(design(lo)), gap, pair
+
+
+def void_design(case, seed: int = 0):
+    """A design with void elements at `x_min` next to solid ones (`x = 1`) and intermediate ones.
+
+    Over the middle half of the rod the inner rows are void and the outer rows solid (the layout
+    an optimum tends to, REFERENCE_CASE §4); with two rows, the lower row is void there and the
+    upper one solid. Elsewhere the design is random in `[0.3, 0.9]`. Element density and
+    stiffness contrasts reach `rho(x_min) / rho0 = c x_min^q ~ 1e-7` and `E(x_min) / E0 = 1e-6`.
+    """
+    mesh, x_min = case.mesh, case.material.x_min
+    grid = np.random.default_rng(seed).uniform(0.3, 0.9, (mesh.ny, mesh.nx - 2))
+    cols = np.arange(mesh.nx - 2)
+    middle = np.abs(cols - (mesh.nx - 3) / 2) <= (mesh.nx - 2) / 4
+    if mesh.ny == 2:
+        grid[0, middle], grid[1, middle] = x_min, 1.0
+    else:
+        inner = np.zeros(mesh.ny, bool)
+        inner[1:-1] = True
+        grid[np.ix_(inner, middle)] = x_min
+        grid[np.ix_(~inner, middle)] = 1.0
+    return jnp.asarray(grid.ravel())
+
+
+# --- checks ----------------------------------------------------------------------------------------
+
+
+def central_difference(f, h: float):
+    """Fourth-order central difference of a scalar function of one real at 0 (four evaluations).
+
+    Second order is not enough next to low densities: `E ~ x^3` and `rho ~ x^6` make the third
+    derivative of `psi` large, and a two-point quotient with `h = 1e-4` is off by ~1e-5 there.
+    """
+    return (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h)
+
+
+def one_sided_difference(f, h: float):
+    """Second-order one-sided difference at 0 into `+h` (for a design variable sitting at `x_min`)."""
+    return (-3 * f(0.0) + 4 * f(h) - f(2 * h)) / (2 * h)
+
+
+def gradient_checks(case, x, grad, *, n_directions: int = 1, n_entries: int = 1, step: float = 1e-4,
+                    seed: int = 0, one_sided_step: float = 1e-6):
+    """Finite-difference counterparts of `grad`: directional derivatives and single entries.
+
+    Directions are random unit vectors over the entries that lie at least `2 step` inside
+    `[x_min, 1]` and away from the SIMP switch at `0.1`; the first entry at `x_min`, if any, is
+    checked with the one-sided difference. The largest `|grad|` entry is always among the checked
+    entries. With `psi` evaluated at rtol 1e-12 and `step = 1e-4`, truncation (`step^4`) and
+    solver noise (`1e-12 / step`) stay near 1e-8 relative.
+
+    **Returns:** a list of `(what, adjoint value, finite-difference value)`.
+    """
+    x = jnp.asarray(x)
+    xn = np.asarray(x)
+    x_min = case.material.x_min
+    interior = (xn - 2 * step > x_min) & (xn + 2 * step <= 1.0) & (np.abs(xn - 0.1) > 2 * step)
+    at_min = xn == x_min
+    rng = np.random.default_rng(seed)
+    g = np.asarray(grad)
+
+    def psi_along(v):
+        v = jnp.asarray(v)
+        return lambda s: float(tight_objective(case, x + s * v))
+
+    out = []
+    for k in range(n_directions):
+        v = rng.normal(size=xn.size) * interior
+        v /= np.linalg.norm(v)
+        out.append((f"direction {k}", float(g @ v), central_difference(psi_along(v), step)))
+    largest = int(np.argmax(np.abs(g) * interior))
+    others = rng.permutation(np.setdiff1d(np.flatnonzero(interior), [largest]))
+    entries = [largest] + [int(i) for i in others[: n_entries - 1]]
+    for i in entries:
+        out.append((f"entry {i}", float(g[i]), central_difference(psi_along(np.eye(xn.size)[i]), step)))
+    for i in np.flatnonzero(at_min)[:1]:
+        out.append((f"entry {i} at x_min", float(g[i]),
+                    one_sided_difference(psi_along(np.eye(xn.size)[i]), one_sided_step)))
+    return out
+
+
+def agreement(grad, checks) -> float:
+    """Largest `|adjoint - finite difference|` over the checks, relative to `max |grad|`."""
+    scale = float(np.max(np.abs(np.asarray(grad))))
+    return max(abs(a - b) for _, a, b in checks) / scale
