@@ -24,7 +24,8 @@ class FiniteDifferences(AbstractSensitivity):
     batch_size: int = 8
 
     def value_and_grad_scene(self, case, scene, *, rtol, atol, solver, max_steps):
-        raise NotImplementedError("Finite differences act on the design, not on the scene parameters.")
+        raise ValueError("Finite differences act on the design, not on the scene parameters: use "
+                         "value_and_grad(case, x, 'fd'), or another method (e.g. 'adjoint') for scene gradients.")
 
     def value_and_grad_design(self, case, x, *, rtol, atol, solver, max_steps):
         def psi(xx):
@@ -34,11 +35,22 @@ class FiniteDifferences(AbstractSensitivity):
             ).psi
 
         idx = jnp.arange(x.size) if self.entries is None else jnp.asarray(self.entries, int)
+        n = idx.size
+        # Every design (x, then x + h e_k, then x - h e_k) goes through one `lax.map` over equal
+        # vmap batches, padded with copies of x: no remainder batch and no second pipeline runs
+        # beside the map. Two independent batched LAPACK calls in one XLA program (e.g. the
+        # Cholesky factors of M(x + h e_k) and M(x - h e_k)) can deadlock jaxlib's CPU thread
+        # pool on a 2-core machine.
+        total = 2 * n + 1
+        padded = -(-total // self.batch_size) * self.batch_size
+        entry = jnp.concatenate([jnp.zeros(1, int), idx, idx, jnp.zeros(padded - total, int)])
+        shift = jnp.concatenate([jnp.zeros(1), jnp.full(n, self.step), jnp.full(n, -self.step),
+                                 jnp.zeros(padded - total)]).astype(x.dtype)
 
-        def central(k):
-            e = jnp.zeros_like(x).at[k].set(self.step)
-            return (psi(x + e) - psi(x - e)) / (2 * self.step)
+        def perturbed(k, h):
+            return psi(x.at[k].add(h))
 
-        diffs = jax.lax.map(central, idx, batch_size=self.batch_size)
+        values = jax.lax.map(lambda a: perturbed(*a), (entry, shift), batch_size=self.batch_size)
+        diffs = (values[1:n + 1] - values[n + 1:2 * n + 1]) / (2 * self.step)
         grad = jnp.full_like(x, jnp.nan).at[idx].set(diffs)
-        return psi(x), grad
+        return values[0], grad
