@@ -9,6 +9,7 @@ from . import cases as cases
 from ._api import objective as objective, simulate_case as simulate_case, value_and_grad as value_and_grad, value_and_grad_scene as value_and_grad_scene
 from ._body_data import BodyData as BodyData, flexible_body_data as flexible_body_data, rigid_body_data as rigid_body_data
 from ._case import FlexibleRodCase as FlexibleRodCase
+from ._gradient_plot import plot_gradient as plot_gradient, row_signs as row_signs
 from ._fe import RodMesh as RodMesh, mass_matrix as mass_matrix, stiffness_matrix as stiffness_matrix
 from ._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
 from ._modes import ModalBasis as ModalBasis, hinged_modes as hinged_modes, retained_eigenpairs as retained_eigenpairs
