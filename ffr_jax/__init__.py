@@ -36,6 +36,9 @@ from ._sensitivity._base import AbstractSensitivity as AbstractSensitivity
 from ._sensitivity._direct import Direct as Direct
 from ._sensitivity._finite_differences import FiniteDifferences as FiniteDifferences
 from ._simp import SIMP as SIMP, RodDesign as RodDesign
+from ._sharding import sharded_map as sharded_map
+from ._sparse_fe import ElementOperator as ElementOperator, sparse_mass_matrix as sparse_mass_matrix, sparse_stiffness_matrix as sparse_stiffness_matrix
+from ._sparse_modes import sparse_hinged_modes as sparse_hinged_modes
 from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state, simulate as simulate
 from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
 from ._optimize._driver import OptimizeResult as OptimizeResult, optimize as optimize

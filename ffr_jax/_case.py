@@ -17,6 +17,8 @@ from ._objective._base import AbstractIntegrand
 from ._scene._scene import Scene
 from ._scene._stiffening import GeometricStiffening
 from ._simp import SIMP, RodDesign
+from ._sparse_fe import resolve_fe_path, sparse_mass_matrix, sparse_stiffness_matrix
+from ._sparse_modes import sparse_hinged_modes
 from ._typing import Design
 
 
@@ -30,6 +32,9 @@ class FlexibleRodCase(eqx.Module):
     - `model`: the partitioned minimal-coordinate model.
     - `integrand`: `F` of `psi = int F dt`; `t0`, `t1`: time span; `y_r0`, `z_r0`: consistent
       redundant initial state; `jump_ts`: times where drivers switch pieces.
+    - `fe_path`: `"dense"` (dense `K`, `M` and a full eigen-solution), `"sparse"` (matrix-free
+      `K`, `M`, shift-invert Lanczos; for large meshes) or `"auto"` (sparse above
+      `SPARSE_MIN_DOF` = 5,000 degrees of freedom). Both give the same numbers and gradients.
     """
 
     design: RodDesign
@@ -43,6 +48,10 @@ class FlexibleRodCase(eqx.Module):
     y_r0: jnp.ndarray
     z_r0: jnp.ndarray
     jump_ts: tuple[float, ...] = eqx.field(static=True, default=())
+    fe_path: str = eqx.field(static=True, default="auto")
+
+    def __check_init__(self):
+        resolve_fe_path(self.fe_path, self.design.mesh)
 
     # --- the design side --------------------------------------------------------------------
     @property
@@ -72,15 +81,28 @@ class FlexibleRodCase(eqx.Module):
         """Joint points of the rod: marker 0 is A, marker 1 is B."""
         return (self.mesh.node_a, self.mesh.node_b)
 
+    @property
+    def sparse_fe(self) -> bool:
+        """Whether this case takes the sparse FE path (`fe_path` resolved for its mesh)."""
+        return resolve_fe_path(self.fe_path, self.mesh) == "sparse"
+
     def fe_matrices(self, x: Design):
-        """`(K(x), M(x))`, dense `(n_dof, n_dof)`."""
+        """`(K(x), M(x))`: dense `(n_dof, n_dof)` arrays, or on the sparse path matrix-free
+        [`ElementOperator`][]s (which support `@`)."""
         x = self.design.check(x)
         xe = self.design.element_densities(x)
-        return stiffness_matrix(self.mesh, self.material.youngs(xe)), mass_matrix(self.mesh, self.material.densities(xe))
+        youngs, densities = self.material.youngs(xe), self.material.densities(xe)
+        if self.sparse_fe:
+            return sparse_stiffness_matrix(self.mesh, youngs), sparse_mass_matrix(self.mesh, densities)
+        return stiffness_matrix(self.mesh, youngs), mass_matrix(self.mesh, densities)
+
+    def _hinged_modes(self, k, m) -> ModalBasis:
+        solve = sparse_hinged_modes if self.sparse_fe else hinged_modes
+        return solve(k, m, self.fixed_dofs, self.n_modes)
 
     def modes(self, x: Design) -> ModalBasis:
         k, m = self.fe_matrices(x)
-        return hinged_modes(k, m, self.fixed_dofs, self.n_modes)
+        return self._hinged_modes(k, m)
 
     def frequencies(self, x: Design):
         """Retained natural frequencies in Hz, `(n_modes,)`."""
@@ -89,7 +111,7 @@ class FlexibleRodCase(eqx.Module):
     def body_data(self, x: Design) -> BodyData:
         """Standard input data of the rod for design `x`."""
         k, m = self.fe_matrices(x)
-        basis = hinged_modes(k, m, self.fixed_dofs, self.n_modes)
+        basis = self._hinged_modes(k, m)
         return flexible_body_data(self.mesh, m, k, basis.modes, self.marker_nodes)
 
     def scene(self, x: Design) -> Scene:
@@ -102,6 +124,11 @@ class FlexibleRodCase(eqx.Module):
                       if isinstance(f, GeometricStiffening) and f.body == self.body]
         if not stiffening:
             return self.with_body_data(self.body_data(x))
+        if self.sparse_fe:
+            raise ValueError(
+                "Geometric stiffening needs the dense FE path (its pre-stress solve uses dense K); "
+                "build the case with fe_path='dense' (meshes up to a few thousand degrees of freedom)."
+            )
         x = self.design.check(x)
         youngs = self.material.youngs(self.design.element_densities(x))
         k, m = self.fe_matrices(x)

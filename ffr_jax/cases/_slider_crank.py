@@ -2,6 +2,7 @@
 
 import functools
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -17,6 +18,8 @@ from .._scene._point_on_line import PointOnLine
 from .._scene._prescribed_point import CrankPin
 from .._scene._scene import Scene
 from .._simp import SIMP, RodDesign
+from .._sparse_fe import resolve_fe_path, sparse_mass_matrix, sparse_stiffness_matrix
+from .._sparse_modes import sparse_hinged_modes
 
 
 def _rigid_slider_crank_guess(t, y, scene, *, length):
@@ -26,14 +29,28 @@ def _rigid_slider_crank_guess(t, y, scene, *, length):
     return jnp.stack([pin[0], pin[1], -jnp.arcsin(pin[1] / length)])
 
 
-def rod_template(design: RodDesign, n_modes: int, value: float = 0.5):
-    """Body data of the rod at a uniform design (used to build scenes and choose partitions)."""
+def rod_template(design: RodDesign, n_modes: int, value: float = 0.5, fe_path: str = "auto"):
+    """Body data of the rod at a uniform design (used to build scenes and choose partitions).
+
+    `fe_path` (`"auto"`, `"dense"`, `"sparse"`) picks the FE path as for [`FlexibleRodCase`][].
+    Compiled as one function: op-by-op dispatch of the body-data products costs seconds.
+    """
+    return _uniform_rod_data(design, n_modes, value, fe_path)
+
+
+@eqx.filter_jit
+def _uniform_rod_data(design: RodDesign, n_modes: int, value: float, fe_path: str):
     mesh = design.mesh
     xe = design.element_densities(design.initial_design(value))
-    k = stiffness_matrix(mesh, design.material.youngs(xe))
-    m = mass_matrix(mesh, design.material.densities(xe))
+    youngs, densities = design.material.youngs(xe), design.material.densities(xe)
     a, b = mesh.node_a, mesh.node_b
-    basis = hinged_modes(k, m, (2 * a, 2 * a + 1, 2 * b + 1), n_modes)
+    fixed = (2 * a, 2 * a + 1, 2 * b + 1)
+    if resolve_fe_path(fe_path, mesh) == "sparse":
+        k, m = sparse_stiffness_matrix(mesh, youngs), sparse_mass_matrix(mesh, densities)
+        basis = sparse_hinged_modes(k, m, fixed, n_modes)
+    else:
+        k, m = stiffness_matrix(mesh, youngs), mass_matrix(mesh, densities)
+        basis = hinged_modes(k, m, fixed, n_modes)
     return flexible_body_data(mesh, m, k, basis.modes, (a, b))
 
 
@@ -50,6 +67,7 @@ def slider_crank(
     height: float = 0.06,
     thickness: float = 0.01,
     material: SIMP = SIMP(),
+    fe_path: str = "auto",
 ) -> FlexibleRodCase:
     """The flexible slider–crank (REFERENCE_CASE.md, paper Sect. 4) and its family of small variants.
 
@@ -64,6 +82,8 @@ def slider_crank(
     - `nx`, `ny`: mesh of the rod (`ny` even, `nx >= 4`); `n_modes`: retained modes; `t1`: end time.
     - `eccentricity`, `speed`, `t_ramp`: crank; `length`, `height`, `thickness`: rod.
     - `material`: the SIMP law (defaults of REFERENCE_CASE §1).
+    - `fe_path`: `"auto"` (default: sparse FE above 5,000 degrees of freedom, e.g. meshes up to
+      1000 x 100 and beyond), `"dense"` or `"sparse"`; both paths give the same numbers.
 
     **Returns:** a [`FlexibleRodCase`][].
     """
@@ -76,7 +96,7 @@ def slider_crank(
         raise ValueError(f"t1 must be positive, got {t1}.")
     mesh = RodMesh(nx, ny, length, height, thickness)
     design = RodDesign(mesh, material)
-    rod = Body("rod", rod_template(design, n_modes))
+    rod = Body("rod", rod_template(design, n_modes, fe_path=fe_path))
     law = RampLaw(t_ramp=t_ramp, angle_at_ramp=speed * t_ramp / 2, speed=speed)
     scene = Scene(
         bodies=(rod,),
@@ -107,4 +127,5 @@ def slider_crank(
         y_r0=y_r0,
         z_r0=z_r0,
         jump_ts=law.breakpoints,
+        fe_path=fe_path,
     )
