@@ -61,18 +61,20 @@ def plot_gradient(case: FlexibleRodCase, grad, *, title: str | None = None, figu
     norm = TwoSlopeNorm(vcenter=0.0, vmin=-scale, vmax=scale)
 
     if figure is None:
-        figure = Figure(figsize=(10, 7), layout="constrained")
-    surface_ax = figure.add_subplot(2, 1, 1, projection="3d")
+        figure = Figure(figsize=(10, 8), layout="constrained")
+    grid_spec = figure.add_gridspec(2, 1, height_ratios=(3, 2))
+    surface_ax = figure.add_subplot(grid_spec[0], projection="3d")
     surface_ax.plot_surface(xc, yc, grid, cmap="RdBu_r", norm=norm, rstride=1, cstride=1, linewidth=0.2,
                             edgecolor="k", antialiased=True)
     surface_ax.set_xlabel("x [m]")
     surface_ax.set_ylabel("y [m]")
-    surface_ax.set_zlabel("dpsi/dx_e")
-    surface_ax.set_box_aspect((3.0, 1.0, 1.0))
+    surface_ax.set_zlabel("dpsi/dx_e", labelpad=12)
+    surface_ax.set_box_aspect((3.0, 1.0, 1.0), zoom=1.25)
+    surface_ax.view_init(elev=25, azim=-60)
     if title is not None:
         surface_ax.set_title(title)
 
-    map_ax = figure.add_subplot(2, 1, 2)
+    map_ax = figure.add_subplot(grid_spec[1])
     dx = mesh.length / mesh.nx
     image = map_ax.imshow(
         grid, origin="lower", cmap="RdBu_r", norm=norm, interpolation="nearest", aspect="auto",
