@@ -41,9 +41,11 @@ def gradient_row(case, x, **check_options):
     start = time.perf_counter()
     psi, grad = jax.block_until_ready(hc.adjoint_value_and_grad(case, x))
     first = time.perf_counter() - start
-    start = time.perf_counter()
-    jax.block_until_ready(hc.adjoint_value_and_grad(case, x))
-    run = time.perf_counter() - start
+    run = float("nan")
+    if first < 120:  # a second, compiled run only where it is cheap; else first ~ compile + run
+        start = time.perf_counter()
+        jax.block_until_ready(hc.adjoint_value_and_grad(case, x))
+        run = time.perf_counter() - start
     grad = np.asarray(grad)
     start = time.perf_counter()
     checks = hc.gradient_checks(case, x, grad, **check_options)
@@ -93,14 +95,15 @@ def cases():
     yield "fine mesh, voids", "48x4 (184 variables), 6 modes, t1 0.15", lambda: gradient_row(fine, hc.void_design(fine))
     long = slider_crank(nx=4, n_modes=2, t1=30.0, t_ramp=2.0)
     yield ("long horizon t1 = 30 s", "4x2, 2 modes, ramp 2 s",
-           lambda: gradient_row(long, long.initial_design(0.5), n_directions=0, n_entries=2))
+           lambda: gradient_row(long, long.initial_design(0.5), n_directions=0, n_entries=1))
 
 
 def markdown(rows, command):
     lines = [SECTION, "", f"Command: `{command}`", "",
              "Adjoint gradient (rtol 1e-10 forward, 1e-8 backward) against fourth-order central differences "
              "of psi at rtol 1e-12, step 1e-4 (one-sided at x_min). Agreement = max |adjoint - fd| / max |grad| "
-             "over the checks. Times on a shared 2-core machine: first call (compile + run), a second run, "
+             "over the checks. Times on a shared 2-core machine: first call (compile + run), a second run "
+             "(skipped, nan, where the first took over 2 min), "
              "and the finite-difference checks. Cases of the 12x2/4-mode structure share one compilation "
              "(the first row pays it).", "",
              "| case | setting | methods compared | finite | agreement | outcome | first call [s] | run [s] | fd checks [s] |",
