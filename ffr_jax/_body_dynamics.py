@@ -28,6 +28,21 @@ def rotation(theta):
     return jnp.array([[c, -s], [s, c]])
 
 
+def rotate(theta, v):
+    """`A(theta) v` for a 2-vector or each column of a `(2, k)` array, written out elementwise.
+
+    The products of the equations of motion are tiny (2 x 2, 2 x n_q); written as elementwise
+    arithmetic they fuse with their neighbours, where a matrix product would be a kernel of its own.
+    """
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    return jnp.stack([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def _matvec(m, v):
+    """`m @ v` for a tiny matrix, as an elementwise product and a sum (see [`rotate`][])."""
+    return jnp.sum(m * v, axis=-1)
+
+
 def _perp(v):
     """`I~ v`: rotation of a 2-vector (or each column of a `(2, k)` array) by +90 degrees."""
     return jnp.stack([-v[1], v[0]])
@@ -42,13 +57,13 @@ def split_body_coordinates(y_b, n_modes: int):
 def body_mass_matrix(data: BodyData, y_b):
     """Mass matrix `M_b(y_b)`, `(3 + n_q, 3 + n_q)`, symmetric positive definite."""
     _, theta, q = split_body_coordinates(y_b, data.n_modes)
-    a = rotation(theta)
-    s_u = data.first_moment + data.modal_moment @ q
-    m_rr = data.mass * jnp.eye(2)
-    m_rt = a @ _perp(s_u)
-    m_rq = a @ data.modal_moment
-    m_tt = data.inertia + 2 * data.inertia_q @ q + q @ data.modal_mass @ q
-    m_tq = data.coupling_0 + data.coupling @ q
+    s_u = data.first_moment + _matvec(data.modal_moment, q)
+    mq = data.inertia_q + _matvec(data.modal_mass, q)
+    m_rr = data.mass * jnp.eye(2, dtype=s_u.dtype)
+    m_rt = rotate(theta, _perp(s_u))
+    m_rq = rotate(theta, data.modal_moment)
+    m_tt = data.inertia + jnp.sum((data.inertia_q + mq) * q)
+    m_tq = data.coupling_0 + _matvec(data.coupling, q)
     top = jnp.concatenate([m_rr, m_rt[:, None], m_rq], axis=1)
     mid = jnp.concatenate([m_rt[None, :], m_tt[None, None], m_tq[None, :]], axis=1)
     bot = jnp.concatenate([m_rq.T, m_tq[:, None], data.modal_mass], axis=1)
@@ -59,19 +74,18 @@ def body_inertia_and_elastic_forces(data: BodyData, y_b, z_b):
     """`-h_omega - h_e`: the quadratic-velocity (Coriolis, centrifugal) and elastic forces, `(3 + n_q,)`."""
     _, theta, q = split_body_coordinates(y_b, data.n_modes)
     _, dtheta, dq = split_body_coordinates(z_b, data.n_modes)
-    a = rotation(theta)
-    s_u = data.first_moment + data.modal_moment @ q
-    mq = data.inertia_q + data.modal_mass @ q
-    h_r = a @ (-(dtheta**2) * s_u + 2 * dtheta * _perp(data.modal_moment @ dq))
-    h_t = 2 * dtheta * (mq @ dq)
-    h_q = -(dtheta**2) * mq + 2 * dtheta * (data.coupling @ dq) + data.modal_stiffness @ q
+    s_u = data.first_moment + _matvec(data.modal_moment, q)
+    mq = data.inertia_q + _matvec(data.modal_mass, q)
+    h_r = rotate(theta, -(dtheta**2) * s_u + 2 * dtheta * _perp(_matvec(data.modal_moment, dq)))
+    h_t = 2 * dtheta * jnp.sum(mq * dq)
+    h_q = -(dtheta**2) * mq + 2 * dtheta * _matvec(data.coupling, dq) + _matvec(data.modal_stiffness, q)
     return -jnp.concatenate([h_r, h_t[None], h_q])
 
 
 def marker_position(data: BodyData, marker: int, y_b):
     """Inertial position `r_P = R + A(theta) (c_P + Phi_P q)` of body marker `marker`."""
     r, theta, q = split_body_coordinates(y_b, data.n_modes)
-    return r + rotation(theta) @ (data.marker_positions[marker] + data.marker_modes[marker] @ q)
+    return r + rotate(theta, data.marker_positions[marker] + _matvec(data.marker_modes[marker], q))
 
 
 def body_kinetic_energy(data: BodyData, y_b, z_b):

@@ -11,6 +11,7 @@ The redundant coordinates `y_r` of a [`Scene`][] are split into independent `y` 
 4. `Mbar zdot = J^T (h_a - M gammabar_r)` with `Mbar = J^T M J` (eqs. 15–18).
 """
 
+import functools
 from collections.abc import Callable
 
 import equinox as eqx
@@ -21,6 +22,7 @@ import numpy as np
 import scipy.linalg
 
 from ._scene._scene import Scene
+from ._small_linalg import lu_factor, lu_solve, matmul, spd_solve
 
 
 class Partition(eqx.Module):
@@ -76,6 +78,28 @@ def _zeros_for_none(primals, tangents):
     )
 
 
+@functools.cache
+def _runs(index: tuple[tuple[int, int], ...]) -> tuple[tuple[int, int, int], ...]:
+    """Static slices `(source, start, stop)` whose concatenation is `[pieces[s][k] for s, k in index]`.
+
+    Consecutive entries of one source become one slice, so that assembling and splitting
+    coordinate vectors is a concatenation of slices (no gather or scatter).
+    """
+    runs: list[list[int]] = []
+    for s, k in index:
+        if runs and runs[-1][0] == s and runs[-1][2] == k:
+            runs[-1][2] = k + 1
+        else:
+            runs.append([s, k, k + 1])
+    return tuple(tuple(r) for r in runs)
+
+
+def _gather_runs(pieces, runs):
+    """Concatenate static slices of `pieces` along the leading axis (a gather without indices)."""
+    parts = [pieces[s][a:b] for s, a, b in runs]
+    return parts[0] if len(parts) == 1 else jnp.concatenate(parts, axis=0)
+
+
 class MinimalModel(eqx.Module):
     """Equations of motion of a [`Scene`][] in minimal coordinates `(y, z)` (paper eqs. 14–18).
 
@@ -83,8 +107,13 @@ class MinimalModel(eqx.Module):
     - `dependent_guess`: `(t, y, scene) -> y_d` starting point of Newton's method (for loops a
       rigid-body estimate of the same assembly branch); default: `y_d` of the initial state.
     - `reference_dependent`: `y_d` at the initial state.
-    - `newton_iterations`, `newton_tol`: at most this many iterations; converged when the update
-      falls below `newton_tol * (1 + |y_d|)`.
+    - `newton_iterations`, `newton_tol`: at most this many iterations; converged when the update,
+      or the error left after it as estimated from the contraction rate `theta` of the last two
+      updates (`theta / (1 - theta) |update|`, for `theta < 1/2`), falls below
+      `newton_tol * (1 + |y_d|)`.
+    - `newton_unrolled`: the first iterations are unrolled (no loop), the rest run in a loop that
+      stops at convergence. With a good `dependent_guess` Newton converges within the unrolled
+      iterations and the loop ends at once; unrolled iterations after convergence only refine.
     """
 
     partition: Partition
@@ -92,18 +121,29 @@ class MinimalModel(eqx.Module):
     dependent_guess: Callable | None = eqx.field(static=True, default=None)
     newton_iterations: int = eqx.field(static=True, default=25)
     newton_tol: float = eqx.field(static=True, default=1e-13)
+    newton_unrolled: int = eqx.field(static=True, default=2)
 
     # --- coordinates -------------------------------------------------------------------------
+    def _assemble_runs(self):
+        n = len(self.partition.independent) + len(self.partition.dependent)
+        source = [None] * n
+        for k, i in enumerate(self.partition.independent):
+            source[i] = (0, k)
+        for k, i in enumerate(self.partition.dependent):
+            source[i] = (1, k)
+        return _runs(tuple(source))
+
     def assemble(self, y, y_d):
         """`y_r = B [y; y_d]` (along the leading axis; trailing axes are carried along)."""
-        n = len(self.partition.independent) + len(self.partition.dependent)
-        out = jnp.zeros((n,) + y.shape[1:], jnp.result_type(y, y_d))
-        out = out.at[np.asarray(self.partition.independent, int)].set(y)
-        return out.at[np.asarray(self.partition.dependent, int)].set(y_d)
+        dtype = jnp.result_type(y, y_d)
+        return _gather_runs((y.astype(dtype), y_d.astype(dtype)), self._assemble_runs())
 
     def split(self, v_r):
         """`v_r -> (v, v_d)`."""
-        return v_r[np.asarray(self.partition.independent, int)], v_r[np.asarray(self.partition.dependent, int)]
+        ind = _runs(tuple((0, i) for i in self.partition.independent))
+        dep = _runs(tuple((0, i) for i in self.partition.dependent))
+        empty = v_r[:0]
+        return (_gather_runs((v_r,), ind) if ind else empty, _gather_runs((v_r,), dep) if dep else empty)
 
     # --- position level ----------------------------------------------------------------------
     def dependent_positions(self, t, y, scene: Scene):
@@ -124,52 +164,83 @@ class MinimalModel(eqx.Module):
         """`cdot = C z_r + c_t` (paper eq. 11)."""
         return jax.jvp(scene.constraint_residual, (t, y_r), (jnp.ones_like(t), z_r))[1]
 
+    def _velocity_level(self, t, y_r, scene: Scene):
+        """`(C_i, c_t, LU of C_d)`: what the velocity and acceleration levels share."""
+        c_t, c = jax.jacfwd(scene.constraint_residual, argnums=(0, 1))(t, y_r)
+        c_i, c_d = self.split(c.T)
+        return c_i.T, c_t, lu_factor(c_d.T)
+
+    def _dependent_velocities(self, z, c_i, c_t, lu):
+        return -lu_solve(lu, matmul(c_i, z) + c_t)
+
     def velocities(self, t, y_r, z, scene: Scene):
         """`z_r = B [z; z_d]` with `z_d = -C_d^-1 (C_i z + c_t)`."""
         if not self.partition.dependent:
             return z
-        c = self.constraint_jacobian(t, y_r, scene)
-        _, c_d = self.split(c.T)
-        b = self.velocity_constraint(t, y_r, self.assemble(z, jnp.zeros(len(self.partition.dependent), z.dtype)), scene)
-        return self.assemble(z, -jnp.linalg.solve(c_d.T, b))
+        c_i, c_t, lu = self._velocity_level(t, y_r, scene)
+        return self.assemble(z, self._dependent_velocities(z, c_i, c_t, lu))
+
+    def _minimal_terms(self, t, y_r, z_r, scene: Scene, c_i, lu):
+        m = scene.mass_matrix(y_r)
+        h = scene.applied_forces(t, y_r, z_r)
+        if not self.partition.dependent:
+            return m, h
+        gamma = jax.jvp(
+            lambda tt, yy: self.velocity_constraint(tt, yy, z_r, scene), (t, y_r), (jnp.ones_like(t), z_r)
+        )[1]
+        f = len(self.partition.independent)
+        dep = -lu_solve(lu, jnp.concatenate([c_i, gamma[:, None]], axis=1))
+        jac = self.assemble(jnp.eye(f, dtype=dep.dtype), dep[:, :f])  # J of eq. 13, (n_r, f)
+        gamma_r = self.assemble(jnp.zeros(f, dep.dtype), dep[:, f])
+        m_jac = matmul(m, jac)
+        return matmul(jac.T, m_jac), matmul(jac.T, h) - matmul(m_jac.T, gamma_r)
 
     def minimal_terms(self, t, y_r, z_r, scene: Scene):
         """`(Mbar, fbar - gammabar)` of paper eq. 15 as functions of the redundant state.
 
         `Mbar = J^T M J` and `J^T (h_a - M gammabar_r)` with `J`, `gammabar_r` of eq. 13.
         """
-        m = scene.mass_matrix(y_r)
-        h = scene.applied_forces(t, y_r, z_r)
         if not self.partition.dependent:
-            return m, h
-        c = self.constraint_jacobian(t, y_r, scene)
-        c_i, c_d = self.split(c.T)
-        c_i, c_d = c_i.T, c_d.T
-        gamma = jax.jvp(
-            lambda tt, yy: self.velocity_constraint(tt, yy, z_r, scene), (t, y_r), (jnp.ones_like(t), z_r)
-        )[1]
-        lu = jax.scipy.linalg.lu_factor(c_d)
-        dep_j = -jax.scipy.linalg.lu_solve(lu, c_i)
-        dep_gamma = -jax.scipy.linalg.lu_solve(lu, gamma)
-        f = len(self.partition.independent)
-        jac = self.assemble(jnp.eye(f), dep_j)  # (n_r, f)
-        gamma_r = self.assemble(jnp.zeros(f, gamma.dtype), dep_gamma)
-        return jac.T @ m @ jac, jac.T @ (h - m @ gamma_r)
+            return self._minimal_terms(t, y_r, z_r, scene, None, None)
+        c_i, _, lu = self._velocity_level(t, y_r, scene)
+        return self._minimal_terms(t, y_r, z_r, scene, c_i, lu)
 
     def accelerations(self, t, y_r, z_r, scene: Scene):
         """`zdot = Mbar^-1 (fbar - gammabar)` (paper eq. 15)."""
         mbar, rhs = self.minimal_terms(t, y_r, z_r, scene)
-        return jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(mbar), rhs)
+        return spd_solve(mbar, rhs)
 
     def state(self, t, y, z, scene: Scene):
         """Redundant positions and velocities `(y_r, z_r)` of the minimal state `(y, z)`."""
         y_r = self.positions(t, y, scene)
         return y_r, self.velocities(t, y_r, z, scene)
 
+    def state_and_accelerations(self, t, y, z, scene: Scene):
+        """`(y_r, z_r, zdot)` at the minimal state `(y, z)`: [`state`][] and [`accelerations`][] in one
+        pass that forms and factors the constraint Jacobian once."""
+        y_r = self.positions(t, y, scene)
+        if not self.partition.dependent:
+            return y_r, z, spd_solve(*self._minimal_terms(t, y_r, z, scene, None, None))
+        c_i, c_t, lu = self._velocity_level(t, y_r, scene)
+        z_r = self.assemble(z, self._dependent_velocities(z, c_i, c_t, lu))
+        mbar, rhs = self._minimal_terms(t, y_r, z_r, scene, c_i, lu)
+        return y_r, z_r, spd_solve(mbar, rhs)
+
     def vector_field(self, t, y, z, scene: Scene):
         """`(ydot, zdot)` of the minimal equations of motion (paper eqs. 14–15)."""
-        y_r, z_r = self.state(t, y, z, scene)
-        return z, self.accelerations(t, y_r, z_r, scene)
+        return z, self.state_and_accelerations(t, y, z, scene)[2]
+
+
+_SINGULAR = (
+    "The coordinate partition became singular: the constraint Jacobian with respect to the "
+    "dependent coordinates lost rank along the motion (e.g. a linkage at a dead point). "
+    "Choose another partition (MinimalModel(partition=...)), or stop the simulation earlier."
+)
+_NOT_CONVERGED = (
+    "Newton's method for the dependent coordinates did not converge: the position constraints "
+    "have no solution near the starting guess (the mechanism cannot assemble, or the guess is "
+    "on another branch). Check the scene geometry or give a better dependent_guess."
+)
 
 
 def _newton(model: MinimalModel, t, y, scene: Scene):
@@ -180,36 +251,45 @@ def _newton(model: MinimalModel, t, y, scene: Scene):
     def residual(y_d):
         return scene.constraint_residual(t, model.assemble(y, y_d))
 
-    def body(carry):
-        y_d, _, k = carry
-        step = jnp.linalg.solve(jax.jacfwd(residual)(y_d), residual(y_d))
-        return y_d - step, jnp.max(jnp.abs(step)), k + 1
+    def iterate(y_d):
+        """One Newton step, and the Hadamard ratio `|det C_d| / prod |rows of C_d|` where it was taken."""
+        res, jac = residual(y_d), jax.jacfwd(residual)(y_d)
+        lu = lu_factor(jac)
+        step = lu_solve(lu, res)
+        hadamard = jnp.abs(lu.det()) / jnp.maximum(jnp.prod(jnp.linalg.norm(jac, axis=1)), 1e-300)
+        return y_d - step, jnp.max(jnp.abs(step)), hadamard
 
-    def cond(carry):
-        y_d, size, k = carry
-        return (k < model.newton_iterations) & (size > model.newton_tol * (1.0 + jnp.max(jnp.abs(y_d))))
+    def converged(y_d, size, previous):
+        # The step size, or the error left after it estimated from the contraction rate
+        # theta = |step_k| / |step_k-1| (Hairer and Wanner, Sect. IV.8): theta / (1 - theta) |step_k|.
+        theta = size / previous
+        left = jnp.where((theta < 0.5) & jnp.isfinite(previous), theta / (1.0 - theta) * size, size)
+        return left <= model.newton_tol * (1.0 + jnp.max(jnp.abs(y_d)))
 
-    y_d, _, _ = jax.lax.while_loop(cond, body, (guess, jnp.asarray(jnp.inf, y.dtype), 0))
-    # Judge regularity where Newton ended, or at its start if it blew up; a NaN there (a NaN guess)
-    # is a convergence failure, not a singular partition.
-    c_d = jax.jacfwd(residual)(jnp.where(jnp.all(jnp.isfinite(y_d)), y_d, guess))
+    unrolled = max(1, min(model.newton_unrolled, model.newton_iterations))
+    y_d, size = guess, jnp.asarray(jnp.inf, y.dtype)
+    for _ in range(unrolled):
+        previous = size
+        y_d, size, hadamard = iterate(y_d)
+    if model.newton_iterations > unrolled:
+        def body(carry):
+            y_d, size, _, _, k = carry
+            y_d, new_size, hadamard = iterate(y_d)
+            return y_d, new_size, size, hadamard, k + 1
+
+        def cond(carry):
+            y_d, size, previous, _, k = carry
+            return (k < model.newton_iterations) & ~converged(y_d, size, previous)
+
+        y_d, size, _, hadamard, _ = jax.lax.while_loop(cond, body, (y_d, size, previous, hadamard, unrolled))
+    # Regularity is judged at the last Newton step. A blown-up or NaN run is a convergence failure,
+    # not a singular partition: NaN fails `hadamard <= ...` and the residual test below catches it.
     scale = 1.0 + jnp.max(jnp.abs(model.assemble(y, y_d)))
-    hadamard = jnp.abs(jnp.linalg.det(c_d)) / jnp.maximum(jnp.prod(jnp.linalg.norm(c_d, axis=1)), 1e-300)
-    y_d = eqx.error_if(
-        y_d,
-        hadamard <= 1e-9,
-        "The coordinate partition became singular: the constraint Jacobian with respect to the "
-        "dependent coordinates lost rank along the motion (e.g. a linkage at a dead point). "
-        "Choose another partition (MinimalModel(partition=...)), or stop the simulation earlier.",
+    singular = hadamard <= 1e-9
+    not_converged = ~(jnp.max(jnp.abs(residual(y_d))) <= 1e-9 * scale)
+    return eqx.branched_error_if(
+        y_d, singular | not_converged, jnp.where(singular, 0, 1), (_SINGULAR, _NOT_CONVERGED)
     )
-    y_d = eqx.error_if(
-        y_d,
-        ~(jnp.max(jnp.abs(residual(y_d))) <= 1e-9 * scale),
-        "Newton's method for the dependent coordinates did not converge: the position constraints "
-        "have no solution near the starting guess (the mechanism cannot assemble, or the guess is "
-        "on another branch). Check the scene geometry or give a better dependent_guess.",
-    )
-    return y_d
 
 
 @eqx.filter_custom_jvp
@@ -232,4 +312,4 @@ def _solve_dependent_jvp(primals, tangents):
         lambda t_, y_, dyn_: residual(t_, y_, eqx.combine(dyn_, static)), (t, y, dyn), (dt, dy, ddyn)
     )
     c_d = jax.jacfwd(lambda yd: scene.constraint_residual(t, model.assemble(y, yd)))(y_d)
-    return y_d, -jnp.linalg.solve(c_d, dres)
+    return y_d, -lu_solve(lu_factor(c_d), dres)

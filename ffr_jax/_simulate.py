@@ -107,8 +107,7 @@ def simulate(
 
     def field(t, state, args):
         scene_ = eqx.combine(jax.tree_util.tree_unflatten(treedef, args), static)
-        y_r, z_r = model.state(t, state[0], state[1], scene_)
-        zdot = model.accelerations(t, y_r, z_r, scene_)
+        y_r, z_r, zdot = model.state_and_accelerations(t, state[0], state[1], scene_)
         if integrand is None:
             return state[1], zdot
         return state[1], zdot, integrand(t, y_r, scene_)

@@ -31,4 +31,4 @@ class PointOnLine(AbstractConstraint):
     def residual(self, t, y_r, scene):
         del t
         normal = jnp.stack([-self.direction[1], self.direction[0]])
-        return (normal @ (scene.marker_position(self.body, self.marker, y_r) - self.point))[None]
+        return jnp.sum(normal * (scene.marker_position(self.body, self.marker, y_r) - self.point))[None]

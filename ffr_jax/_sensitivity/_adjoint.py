@@ -10,6 +10,7 @@ import numpy as np
 from .._case import FlexibleRodCase
 from .._scene._scene import Scene
 from .._simulate import simulate
+from .._small_linalg import lu_factor, lu_solve, matmul, spd_solve
 from ._base import AbstractSensitivity
 
 
@@ -44,7 +45,7 @@ def _redundant_functions(case: FlexibleRodCase, t, zdot):
 
     def ode(y_r, z_r, scene):
         mbar, rhs = model.minimal_terms(t, y_r, z_r, scene)
-        return mbar @ zdot - rhs
+        return matmul(mbar, zdot) - rhs
 
     def f(y_r, scene):
         return case.integrand(t, y_r, scene)
@@ -53,9 +54,7 @@ def _redundant_functions(case: FlexibleRodCase, t, zdot):
 
 
 def _state(case, t, y, z, scene):
-    y_r, z_r = case.model.state(t, y, z, scene)
-    zdot = case.model.accelerations(t, y_r, z_r, scene)
-    return y_r, z_r, zdot
+    return case.model.state_and_accelerations(t, y, z, scene)
 
 
 def adjoint_terms(case: FlexibleRodCase, t, y, z, scene: Scene):
@@ -82,16 +81,16 @@ def adjoint_terms(case: FlexibleRodCase, t, y, z, scene: Scene):
     f_y = jax.grad(f)(y_r, scene)
 
     if dep.size:
-        lu_c = jax.scipy.linalg.lu_factor(c_y[:, dep])
-        lu_cd = jax.scipy.linalg.lu_factor(cd_z[:, dep])
-        dyd_dy = -jax.scipy.linalg.lu_solve(lu_c, c_y[:, ind])
-        dzd_dy = -jax.scipy.linalg.lu_solve(lu_cd, cd_y[:, ind] + cd_y[:, dep] @ dyd_dy)
-        dzd_dz = -jax.scipy.linalg.lu_solve(lu_cd, cd_z[:, ind])
-        s1 = -(v_y[:, ind] + v_y[:, dep] @ dyd_dy + v_z[:, dep] @ dzd_dy)
-        s2 = -(v_z[:, ind] + v_z[:, dep] @ dzd_dz)
-        t1 = o_y[:, ind] + o_y[:, dep] @ dyd_dy + o_z[:, dep] @ dzd_dy
-        t2 = o_z[:, ind] + o_z[:, dep] @ dzd_dz
-        r1 = f_y[ind] + f_y[dep] @ dyd_dy
+        lu_c = lu_factor(c_y[:, dep])
+        lu_cd = lu_factor(cd_z[:, dep])
+        dyd_dy = -lu_solve(lu_c, c_y[:, ind])
+        dzd_dy = -lu_solve(lu_cd, cd_y[:, ind] + matmul(cd_y[:, dep], dyd_dy))
+        dzd_dz = -lu_solve(lu_cd, cd_z[:, ind])
+        s1 = -(v_y[:, ind] + matmul(v_y[:, dep], dyd_dy) + matmul(v_z[:, dep], dzd_dy))
+        s2 = -(v_z[:, ind] + matmul(v_z[:, dep], dzd_dz))
+        t1 = o_y[:, ind] + matmul(o_y[:, dep], dyd_dy) + matmul(o_z[:, dep], dzd_dy)
+        t2 = o_z[:, ind] + matmul(o_z[:, dep], dzd_dz)
+        r1 = f_y[ind] + matmul(dyd_dy.T, f_y[dep])
     else:
         lu_c = lu_cd = None
         s1, s2 = -v_y[:, ind], -v_z[:, ind]
@@ -122,10 +121,10 @@ def design_term(case: FlexibleRodCase, t, state, partials, scene: Scene, mu, nu)
     v_y, v_z, o_y, o_z, f_y, cd_y, lu_c, lu_cd = partials
     c, cdot, _, ode, f = _redundant_functions(case, t, zdot)
     if dep.size:
-        a_z = mu @ v_z[:, dep] - nu @ o_z[:, dep]
-        b = jax.scipy.linalg.lu_solve(lu_cd, a_z, trans=1)
-        a_y = f_y[dep] + mu @ v_y[:, dep] - nu @ o_y[:, dep] - b @ cd_y[:, dep]
-        e = jax.scipy.linalg.lu_solve(lu_c, a_y, trans=1)
+        a_z = matmul(v_z[:, dep].T, mu) - matmul(o_z[:, dep].T, nu)
+        b = lu_solve(lu_cd, a_z, trans=1)
+        a_y = f_y[dep] + matmul(v_y[:, dep].T, mu) - matmul(o_y[:, dep].T, nu) - matmul(cd_y[:, dep].T, b)
+        e = lu_solve(lu_c, a_y, trans=1)
     else:
         b = e = jnp.zeros((0,), mu.dtype)
 
@@ -180,8 +179,8 @@ class Adjoint(AbstractSensitivity):
             mu, nu, _ = state
             y, z = dense.evaluate(t)[:2]
             terms, red, partials = adjoint_terms(case, t, y, z, scene)
-            mu_dot = terms.s1.T @ mu + terms.t1.T @ nu - terms.r1
-            nu_dot = jnp.linalg.solve(terms.mbar, terms.s2.T @ mu - terms.mbar_dot @ nu + terms.t2.T @ nu)
+            mu_dot = matmul(terms.s1.T, mu) + matmul(terms.t1.T, nu) - terms.r1
+            nu_dot = spd_solve(terms.mbar, matmul(terms.s2.T, mu) - matmul(terms.mbar_dot, nu) + matmul(terms.t2.T, nu))
             g = design_term(case, t, red, partials, scene, mu, nu)
             return mu_dot, nu_dot, -jax.flatten_util.ravel_pytree(g)[0]
 

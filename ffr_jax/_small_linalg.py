@@ -1,0 +1,171 @@
+"""Dense linear algebra for the tiny matrices of the equations of motion, unrolled into plain jnp ops.
+
+A multibody model solves with a handful of tiny matrices per evaluation of its vector field:
+the constraint Jacobian of the dependent coordinates `C_d` (`n_c x n_c`, 3 for the slider–crank)
+and the minimal mass matrix `Mbar` (`f x f`, 6 for the reference case). XLA:CPU runs every
+LAPACK routine as a separate custom call with a fixed cost of a few microseconds, more than the
+arithmetic of such a matrix; an elimination unrolled over the static size fuses with the
+surrounding code instead. Above `UNROLL_MAX` the LAPACK routines are used.
+
+All functions here are compositions of differentiable jnp operations (the pivot choice is
+piecewise constant), so `jax.jvp`, `jax.vjp` and `jax.vmap` apply to them as to any jnp code.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+
+UNROLL_MAX = 12
+
+
+CLOSED_FORM_MAX = 3
+
+
+class LU(eqx.Module):
+    """A factorisation of a square matrix `A` for solves and its determinant.
+
+    For `n <= CLOSED_FORM_MAX` it holds `A^-1` in closed form (adjugate over determinant, one
+    fused kernel; `perm` is unused and `sign` holds `det A`). Otherwise `P A = L U`: `lu` holds
+    `L` (unit diagonal, below) and `U` (on and above), `perm` the row order (`P A = A[perm]`),
+    `sign` the determinant of `P`.
+    """
+
+    lu: jnp.ndarray
+    perm: jnp.ndarray
+    sign: jnp.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.lu.shape[0]
+
+    def det(self):
+        """`det A`."""
+        if self.n <= CLOSED_FORM_MAX:
+            return self.sign
+        return self.sign * jnp.prod(jnp.diagonal(self.lu))
+
+
+def _adjugate(a):
+    """`(adj A, det A)` of a `1 x 1`, `2 x 2` or `3 x 3` matrix, in a few elementwise operations."""
+    n = a.shape[0]
+    if n == 1:
+        return jnp.ones_like(a), a[0, 0]
+    if n == 2:
+        adj = jnp.array([[1.0, -1.0], [-1.0, 1.0]], a.dtype) * a[::-1, ::-1].T
+        return adj, a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    # Column i of adj A is the cross product of rows i+1 and i+2 (indices mod 3).
+    b, c = jnp.roll(a, -1, axis=0), jnp.roll(a, -2, axis=0)
+    cross = jnp.roll(b, -1, axis=1) * jnp.roll(c, -2, axis=1) - jnp.roll(b, -2, axis=1) * jnp.roll(c, -1, axis=1)
+    return cross.T, jnp.sum(a[0] * cross[0])
+
+
+def lu_factor(a) -> LU:
+    """Closed-form inverse (`n <= CLOSED_FORM_MAX`), Gaussian elimination with partial pivoting, or
+    LAPACK `getrf` (`n > UNROLL_MAX`).
+
+    A zero pivot (a singular matrix) is kept in `U` (so [`LU.det`][] is zero) and not divided by,
+    so that no NaN appears; solves with such a factorisation are meaningless, as with LAPACK.
+    """
+    n = a.shape[0]
+    if n <= CLOSED_FORM_MAX:
+        adj, det = _adjugate(a)
+        return LU(lu=adj / jnp.where(det == 0, 1.0, det), perm=jnp.arange(n), sign=det)
+    if n > UNROLL_MAX:
+        lu, pivots, perm = jax.lax.linalg.lu(a)
+        swaps = jnp.sum(pivots != jnp.arange(n, dtype=pivots.dtype))
+        return LU(lu=lu, perm=perm, sign=jnp.where(swaps % 2 == 0, 1.0, -1.0).astype(a.dtype))
+    rows = jnp.arange(n)
+    perm = rows
+    sign = jnp.ones((), a.dtype)
+    for k in range(n):
+        if k < n - 1:
+            p = jnp.argmax(jnp.where(rows >= k, jnp.abs(a[:, k]), -1.0))
+            is_k, is_p = (rows == k)[:, None], (rows == p)[:, None]
+            row_k, row_p = a[k], a[p]
+            a = jnp.where(is_k, row_p[None, :], jnp.where(is_p, row_k[None, :], a))
+            perm = jnp.where(rows == k, perm[p], jnp.where(rows == p, perm[k], perm))
+            sign = jnp.where(p != k, -sign, sign)
+            pivot = a[k, k]
+            below = rows > k
+            factors = jnp.where(below, a[:, k] / jnp.where(pivot == 0, 1.0, pivot), 0.0)
+            update = jnp.where(rows > k, a[k], 0.0)
+            a = a - factors[:, None] * update[None, :]
+            a = jnp.where(below[:, None] & (rows == k)[None, :], factors[:, None], a)
+    return LU(lu=a, perm=perm, sign=sign)
+
+
+def matmul(a, b):
+    """`a @ b` for tiny matrices (or a matrix and a vector), as a broadcast product and a sum.
+
+    XLA:CPU hands every `dot` to a library kernel whose fixed cost exceeds the arithmetic of a
+    9 x 9 product; the elementwise form fuses into a single loop kernel.
+    """
+    if b.ndim == 1:
+        return jnp.sum(a * b[None, :], axis=1)
+    return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
+
+
+def _safe(d):
+    return jnp.where(d == 0, 1.0, d)
+
+
+def lu_solve(lu: LU, b, trans: int = 0):
+    """`A^-1 b` (`trans=0`) or `A^-T b` (`trans=1`) from [`lu_factor`][]; `b` is `(n,)` or `(n, m)`."""
+    n = lu.n
+    vector = b.ndim == 1
+    x = b[:, None] if vector else b
+    if n <= CLOSED_FORM_MAX:
+        inv = lu.lu if trans == 0 else lu.lu.T
+        x = jnp.sum(inv[:, :, None] * x[None, :, :], axis=1)
+        return x[:, 0] if vector else x
+    if n > UNROLL_MAX:
+        perm_inv = jnp.zeros_like(lu.perm).at[lu.perm].set(jnp.arange(n))
+        if trans == 0:
+            x = jsl.solve_triangular(lu.lu, x[lu.perm], lower=True, unit_diagonal=True)
+            x = jsl.solve_triangular(lu.lu, x, lower=False)
+        else:
+            x = jsl.solve_triangular(lu.lu, x, lower=False, trans=1)
+            x = jsl.solve_triangular(lu.lu, x, lower=True, unit_diagonal=True, trans=1)[perm_inv]
+        return x[:, 0] if vector else x
+    a = lu.lu
+    rows = jnp.arange(n)
+    if trans == 0:
+        x = x[lu.perm]
+        for k in range(n - 1):  # L y = P b (unit lower)
+            x = x - jnp.where(rows > k, a[:, k], 0.0)[:, None] * x[k][None, :]
+        for k in reversed(range(n)):  # U x = y
+            xk = x[k] / _safe(a[k, k])
+            x = jnp.where((rows == k)[:, None], xk[None, :], x - jnp.where(rows < k, a[:, k], 0.0)[:, None] * xk[None, :])
+    else:
+        for k in range(n):  # U^T w = b (lower)
+            xk = x[k] / _safe(a[k, k])
+            x = jnp.where((rows == k)[:, None], xk[None, :], x - jnp.where(rows > k, a[k], 0.0)[:, None] * xk[None, :])
+        for k in reversed(range(1, n)):  # L^T v = w (unit upper)
+            x = x - jnp.where(rows < k, a[k], 0.0)[:, None] * x[k][None, :]
+        x = jnp.zeros_like(x).at[lu.perm].set(x) if n > 1 else x
+    return x[:, 0] if vector else x
+
+
+def solve(a, b):
+    """`A^-1 b` for a general square `A` (partial pivoting)."""
+    return lu_solve(lu_factor(a), b)
+
+
+def spd_solve(a, b):
+    """`A^-1 b` for a symmetric positive definite `A` (Cholesky for `n > UNROLL_MAX`).
+
+    Gauss–Jordan elimination without pivoting on `[A | b]`, one fused update per column; without
+    pivoting it is stable for such matrices (the pivots are those of `A = L D L^T`).
+    """
+    n = a.shape[0]
+    if n > UNROLL_MAX:
+        return jsl.cho_solve(jsl.cho_factor(a), b)
+    vector = b.ndim == 1
+    aug = jnp.concatenate([a, b[:, None] if vector else b], axis=1)
+    unit = jnp.eye(n, dtype=aug.dtype)
+    for k in range(n):
+        row = aug[k] / aug[k, k]
+        aug = aug - (aug[:, k] - unit[:, k])[:, None] * row[None, :]
+    x = aug[:, n:]
+    return x[:, 0] if vector else x
