@@ -3,7 +3,7 @@ or, where the mechanism cannot be simulated, a clear error instead of a number.
 
 Cases of one structure (12 x 2 mesh, 4 modes, t1 = 0.15 s with a 0.05 s crank run-up) share one
 compiled adjoint gradient and one compiled objective (see `hard_cases.variant`); the coarse mesh
-is a second structure. The costly members (20–30 modes, a fine mesh, t1 = 30 s, the dead-point
+is a second structure. The costly members (20 modes, a fine mesh, t1 = 30 s, the dead-point
 limit reached during the motion) are marked `slow` and are rows of `benchmarks/bench_hard_cases.py`.
 
 The comparison is with central differences of `psi` evaluated at rtol 1e-12 (a directional
@@ -108,9 +108,10 @@ def test_coarse_mesh_longer_horizon():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("n_modes", [20, 30])
-def test_many_retained_modes(n_modes):
-    case = slider_crank(n_modes=n_modes)
+def test_many_retained_modes():
+    # 20 of the 75 free dofs (highest retained frequency ~6.5 kHz, 17 times the 4-mode case's).
+    # 30 modes works the same way but its adjoint gradient takes over half an hour here.
+    case = slider_crank(n_modes=20)
     assert_gradient_agrees(case, case.initial_design(0.5))
 
 
