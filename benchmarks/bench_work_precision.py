@@ -183,14 +183,16 @@ def plots(data):
                 continue
             s = res["spec"]
             t = [r["run_s"] for r in res["rows"]]
+            color = f"C{(('forward',) + METHODS).index(s['method'])}"
             axes[0].loglog(t, [max(r["psi_error"], 1e-16) for r in res["rows"]], markers[s["solver"]],
-                           label=f"{s['method']} {s['solver']}")
+                           color=color, label=f"{s['method']} {s['solver']}")
             if s["method"] != "forward":
                 axes[1].loglog(t, [max(r["grad_error"], 1e-16) for r in res["rows"]], markers[s["solver"]],
-                               label=f"{s['method']} {s['solver']}")
+                               color=color, label=f"{s['method']} {s['solver']}")
         axes[0].set(xlabel="run time [s] (median, compiled)", ylabel="relative error of psi", title="psi")
         axes[1].set(xlabel="run time [s] (median, compiled)", ylabel="relative max-norm error of grad psi",
                     title="gradient (tolerance sweep along each curve)")
+        axes[0].legend(fontsize=7, ncol=2)
         axes[1].legend(fontsize=7, ncol=2)
         fig.savefig(RESULTS / "work_precision.png", dpi=120)
         plt.close(fig)
@@ -210,12 +212,16 @@ def plots(data):
             rows = sorted((r["n_design"], r["rows"][0]["run_s"]) for r in data["scaling"]
                           if "error" not in r and r["spec"]["method"] == method)
             if rows:
-                ax.loglog(*zip(*rows), "o-", label=method)
+                ax.loglog(*zip(*rows), "o-", color=f"C{(('forward',) + METHODS).index(method)}", label=method)
         ax.set(xlabel="design variables", ylabel="run time [s] (compiled)",
                title="gradient cost vs number of design variables")
         ax.legend()
         fig.savefig(RESULTS / "scaling.png", dpi=120)
         plt.close(fig)
+
+
+def _fmt(value) -> str:
+    return "–" if value is None else f"{value:.1e}"
 
 
 def markdown(data, command, case) -> str:
@@ -243,9 +249,9 @@ def markdown(data, command, case) -> str:
                 lines.append(
                     f"| {s['solver']} | {s['method']} | {res['compile_s']:.1f} | {res['peak_rss_mb']:.0f} | "
                     f"{r['rtol']:.0e} | {r['run_s']:.3f} | {r['psi_error']:.1e} | "
-                    f"{r.get('grad_error', float('nan')):.1e} |" if k == 0 else
+                    f"{_fmt(r.get('grad_error'))} |" if k == 0 else
                     f"| | | | | {r['rtol']:.0e} | {r['run_s']:.3f} | {r['psi_error']:.1e} | "
-                    f"{r.get('grad_error', float('nan')):.1e} |")
+                    f"{_fmt(r.get('grad_error'))} |")
         lines.append("")
     if "modes" in data:
         lines += [f"### Cost versus retained modes (`{nx} x {ny}` mesh, t1 = {t1}, Tsit5, rtol 1e-10)", "",
@@ -258,6 +264,9 @@ def markdown(data, command, case) -> str:
         lines.append("")
     if "scaling" in data:
         lines += [f"### Cost versus design variables ({n_modes} modes, t1 = {t1}, Tsit5, rtol 1e-10, one run each)", "",
+                  "Single runs on a shared machine: a row can be off by 2x (a forward run slower than the "
+                  "gradients of the same mesh is such noise), and compile = first call - run is unreliable "
+                  "where the run dominates (fd). The sparse FE path (bench_scale.py) extends the adjoint to 1e5 variables.", "",
                   "![scaling](results/scaling.png)", "",
                   "| mesh | design variables | method | compile [s] | run [s] | run / forward | peak RSS [MB] |",
                   "|---|---:|---|---:|---:|---:|---:|"]
@@ -301,7 +310,16 @@ def main():
     parser.add_argument("--meshes", nargs="+", default=["12x2", "27x4", "52x6", "102x6"])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--timeout", type=float, default=1800)
+    parser.add_argument("--render", metavar="JSON", help="only redraw figures and tables from a saved JSON")
     args = parser.parse_args()
+    if args.render:
+        saved = json.loads(pathlib.Path(args.render).read_text())
+        plots(saved["data"])
+        text = markdown(saved["data"], saved["command"], saved["case"])
+        (RESULTS / "work_precision.md").write_text(text + "\n")
+        write_section(text)
+        print(text)
+        return
     if args.worker:
         spec = json.loads(args.worker)
         spec["case"] = [int(spec["case"][0]), int(spec["case"][1]), int(spec["case"][2]), *spec["case"][3:]]
@@ -322,7 +340,8 @@ def main():
         data["modes"] = study_modes(args, log)
     if "scaling" in args.study:
         data["scaling"] = study_scaling(args, log)
-    (RESULTS / "work_precision.json").write_text(json.dumps(data, indent=1))
+    (RESULTS / "work_precision.json").write_text(json.dumps({"command": command.strip(), "case": args.case,
+                                                              "data": data}, indent=1))
     plots(data)
     text = markdown(data, command.strip(), args.case)
     (RESULTS / "work_precision.md").write_text(text + "\n")
