@@ -19,3 +19,6 @@ _cache = os.environ.get("FFR_JAX_TEST_CACHE", os.path.join(os.path.expanduser("~
 if _cache:
     jax.config.update("jax_compilation_cache_dir", _cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    # Subprocesses (the CLI tests, the notebook kernels) read the same settings from the environment.
+    os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", _cache)
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.5")
