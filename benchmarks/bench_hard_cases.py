@@ -63,7 +63,12 @@ def error_row(call, expected: str):
     except Exception as err:  # the outcome under test is the error itself
         message = str(err)
         found = [m for m in expected.split("|") if m in message]
-        outcome = f"{type(err).__name__}: '{found[0]}'" if found else f"unexpected {type(err).__name__}"
+        if found:
+            outcome = f"{type(err).__name__}: '{found[0]}'"
+        else:  # name the error: its first line that is not traceback noise
+            lines = [ln.strip() for ln in message.splitlines() if ln.strip() and not ln.startswith(" ")]
+            summary = next((ln for ln in lines if type(err).__name__ in ln), lines[0] if lines else "")
+            outcome = f"unexpected {type(err).__name__}: {summary[:200]}"
         return {"outcome": outcome, "ok": bool(found), "first_s": time.perf_counter() - start}
     return {"outcome": "returned a number (expected an error)", "ok": False, "first_s": time.perf_counter() - start}
 
