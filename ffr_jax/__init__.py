@@ -45,7 +45,8 @@ from ._optimize._driver import OptimizeResult as OptimizeResult, optimize as opt
 from ._optimize._filter import DensityFilter as DensityFilter
 from ._optimize._history import History as History
 from ._optimize._oc import optimality_criteria as optimality_criteria
-from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective
+from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective, physical_densities as physical_densities
+from ._optimize._projection import HeavisideProjection as HeavisideProjection, beta_continuation as beta_continuation
 from ._optimize._plot import plot_design as plot_design, plot_history as plot_history
 from ._optimize._step import StepInfo as StepInfo, make_step as make_step
 from ._optimize._volume import VolumeConstraint as VolumeConstraint

@@ -92,6 +92,90 @@ def test_filter_rejects_negative_radius(radius):
         fj.DensityFilter(small_design(), radius)
 
 
+# --- Heaviside projection ----------------------------------------------------------------------
+X_MIN = 0.01
+
+
+def test_projection_keeps_the_bounds_is_increasing_and_sharpens_with_beta():
+    projection = fj.HeavisideProjection(0.5, x_min=X_MIN)
+    x = jnp.linspace(X_MIN, 1.0, 201)
+    for beta in (0.5, 4.0, 64.0):
+        p = np.asarray(projection(x, beta))
+        assert p[0] == X_MIN and p[-1] == 1.0, f"P maps x_min -> x_min and 1 -> 1 (beta {beta})"
+        assert np.all(np.diff(p) >= 0.0), f"P does not decrease (beta {beta})"
+        if beta < 10.0:  # steeper, P saturates to round-off away from eta
+            assert np.all(np.diff(p) > 0.0), f"P increases (beta {beta})"
+    np.testing.assert_allclose(projection(x, 1e-6), x, atol=1e-9, err_msg="P tends to the identity as beta -> 0")
+    sharp = np.asarray(projection(x, 256.0))
+    far = np.abs(np.asarray(x) - 0.5) > 0.05
+    assert np.all((sharp[far] < X_MIN + 1e-6) | (sharp[far] > 1.0 - 1e-6)), "P tends to a step as beta -> inf"
+
+
+@pytest.mark.parametrize("eta", [0.0, 1.0, float("nan")])
+def test_projection_rejects_a_bad_threshold(eta):
+    with pytest.raises(ValueError, match="eta"):
+        fj.HeavisideProjection(eta)
+
+
+def test_beta_continuation_schedule():
+    schedule = fj.beta_continuation(1.0, 8.0, every=3)
+    assert [schedule(k) for k in range(13)] == [1.0] * 3 + [2.0] * 3 + [4.0] * 3 + [8.0] * 4
+    for bad in ({"start": 0.0, "stop": 8.0, "every": 3}, {"start": 4.0, "stop": 2.0, "every": 3},
+                {"start": 1.0, "stop": 8.0, "every": 0}, {"start": 1.0, "stop": 8.0, "every": 3, "factor": 1.0}):
+        with pytest.raises(ValueError, match="beta continuation"):
+            fj.beta_continuation(**bad)
+
+
+@pytest.mark.parametrize("beta", [1.0, 8.0])
+def test_projected_gradient_matches_finite_differences(beta):
+    filt = fj.DensityFilter(small_design(), 1.5)
+    projection = fj.HeavisideProjection(0.4, x_min=X_MIN)
+    n = filt.weights.shape[0]
+    psi, value_and_grad = surrogate(n)
+    fun = jax.jit(fj.filtered_objective(value_and_grad, filt, projection))
+    x = jnp.asarray(np.random.default_rng(1).uniform(0.2, 0.9, n))
+    value, grad = fun(x, beta)
+
+    def psi_of_design(x):
+        return psi(projection(filt(x), beta))
+
+    np.testing.assert_allclose(value, psi_of_design(x), rtol=ROUND_OFF, err_msg="projected value psi(P(H x))")
+    step = 1e-6
+    fd = jax.vmap(lambda e: (psi_of_design(x + step * e) - psi_of_design(x - step * e)) / (2 * step))(jnp.eye(n))
+    np.testing.assert_allclose(grad, fd, rtol=FD_REL_TOL, atol=FD_REL_TOL * jnp.max(jnp.abs(fd)),
+                               err_msg=f"H^T P' grad against central differences of psi(P(H x)), beta {beta}")
+
+
+def test_projected_objective_and_constraint_need_beta():
+    filt = fj.DensityFilter(small_design(), 1.5)
+    projection = fj.HeavisideProjection(x_min=X_MIN)
+    x = jnp.full(filt.weights.shape[0], 0.5)
+    with pytest.raises(ValueError, match="pass beta"):
+        fj.physical_densities(x, filt, projection)
+    constraint = fj.VolumeConstraint(VOLUME, filter=filt, projection=projection)
+    with pytest.raises(ValueError, match="beta"):
+        constraint.project(x)
+    with pytest.raises(ValueError, match="no projection"):
+        fj.VolumeConstraint(VOLUME, filter=filt).fraction(x, 2.0)
+    with pytest.raises(ValueError, match="x_min"):
+        fj.VolumeConstraint(VOLUME, x_min=0.02, projection=projection)
+
+
+@pytest.mark.parametrize("beta", [1.0, 16.0])
+def test_projected_volume_holds_on_the_physical_design(beta):
+    filt = fj.DensityFilter(small_design(), 1.5)
+    projection = fj.HeavisideProjection(x_min=X_MIN)
+    constraint = fj.VolumeConstraint(VOLUME, filter=filt, projection=projection)
+    ys = 0.5 + 0.8 * jax.random.normal(jax.random.PRNGKey(2), (5, filt.weights.shape[0]))
+    xs = jax.jit(jax.vmap(constraint.project, in_axes=(0, None)))(ys, beta)
+    physical = jax.vmap(lambda x: fj.physical_densities(x, filt, projection, beta))(xs)
+    np.testing.assert_allclose(jnp.mean(physical, axis=1), VOLUME, atol=VOLUME_TOL,
+                               err_msg=f"physical volume mean(P(H x)) of the projection, beta {beta}")
+    assert bool(jnp.all((xs >= X_MIN) & (xs <= 1.0))), "bounds of the projection"
+    again = jax.vmap(constraint.project, in_axes=(0, None))(xs, beta)
+    np.testing.assert_allclose(again, xs, atol=1e-12, err_msg="a feasible design stays in place")
+
+
 # --- volume constraint --------------------------------------------------------------------------
 @pytest.mark.parametrize("radius", [0.0, 2.5])
 def test_projection_is_feasible_euclidean_and_batched(radius):
@@ -219,15 +303,48 @@ def test_step_compiles_once(name):
     assert step._cache_size() == 1
 
 
+@pytest.mark.parametrize("name", ["adam", "oc"])
+def test_projected_volume_holds_after_every_update_through_a_continuation(name):
+    filt = fj.DensityFilter(small_design(), 1.5)
+    projection = fj.HeavisideProjection(x_min=X_MIN)
+    n = filt.weights.shape[0]
+    _, value_and_grad = surrogate(n)
+    constraint = fj.VolumeConstraint(VOLUME, filter=filt, projection=projection)
+    optimizer = optimizers(constraint)[name]
+    traces = []
+
+    def fun(x, beta):
+        traces.append(None)
+        return fj.filtered_objective(value_and_grad, filt, projection)(x, beta)
+
+    step = fj.make_step(fun, optimizer, constraint)
+    schedule = fj.beta_continuation(1.0, 16.0, every=5)
+    x = constraint.project(jnp.asarray(np.random.default_rng(4).uniform(0.1, 0.9, n)), schedule(0))
+    state = optimizer.init(x)
+    for k in range(25):
+        beta = jnp.asarray(schedule(k))
+        x, state, info = step(x, state, beta)
+        physical = fj.physical_densities(x, filt, projection, beta)
+        assert abs(float(jnp.mean(physical)) - VOLUME) < VOLUME_TOL, f"physical volume after update {k}"
+        assert abs(float(info.volume) - VOLUME) < VOLUME_TOL, "reported volume"
+        assert bool(jnp.all((x >= X_MIN) & (x <= 1.0))), "bounds after an update"
+    assert len(traces) == 1, f"raising beta retraced the step ({len(traces)} traces)"
+    # No "psi decreases" here: each beta defines another function (the convex surrogate, sum(w / x),
+    # even grows as the design turns 0-1); descent at a fixed beta is the unprojected tests' claim.
+
+
 # --- driver, log and checkpoints ----------------------------------------------------------------
-def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLUME, every=4):
+def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLUME, every=4, projected=False):
     filt = fj.DensityFilter(small_design(), 1.5)
     _, value_and_grad = surrogate(filt.weights.shape[0])
-    constraint = fj.VolumeConstraint(volume, filter=filt)
+    projection = fj.HeavisideProjection(x_min=X_MIN) if projected else None
+    beta = fj.beta_continuation(1.0, 8.0, every=3) if projected else None
+    constraint = fj.VolumeConstraint(volume, filter=filt, projection=projection)
     return fj.optimize(
-        fj.filtered_objective(value_and_grad, filt), jnp.full(filt.weights.shape[0], volume),
+        fj.filtered_objective(value_and_grad, filt, projection), jnp.full(filt.weights.shape[0], volume),
         optimizers(constraint)[name], constraint, iterations=iterations, directory=directory, resume=resume,
         checkpoint_every=every, config={"optimizer": name, "volume": volume}, progress=False, callback=callback,
+        beta=beta,
     )
 
 
@@ -243,13 +360,14 @@ def interrupt_at(k):
     return callback
 
 
-@pytest.mark.parametrize("name", ["adam", "oc"])
-def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name):
-    whole = run(tmp_path / "whole", name, 12)
+@pytest.mark.parametrize("name,projected", [("adam", False), ("oc", False), ("adam", True)])
+def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name, projected):
+    # Projected: beta doubles every 3 steps, so the resumed part (steps 4-11) crosses raises.
+    whole = run(tmp_path / "whole", name, 12, projected=projected)
     with pytest.raises(Interrupt):  # after 6 steps; the last checkpoint holds 4
-        run(tmp_path / "cut", name, 12, callback=interrupt_at(5))
+        run(tmp_path / "cut", name, 12, callback=interrupt_at(5), projected=projected)
     assert fj.load_checkpoint(tmp_path / "cut" / "checkpoint.npz").iteration == 4
-    resumed = run(tmp_path / "cut", name, 12, resume=True)
+    resumed = run(tmp_path / "cut", name, 12, resume=True, projected=projected)
     np.testing.assert_array_equal(resumed.x, whole.x, err_msg="final design")
     for got, expected, quantity in zip(resumed.history, whole.history, ("psi", "volume", "max change"), strict=True):
         np.testing.assert_array_equal(got, expected, err_msg=f"history of {quantity}")
@@ -351,6 +469,8 @@ def test_cli_resume_errors_are_reported(tmp_path, capsys):
     assert "corrupt" in capsys.readouterr().err
     assert main(["optimize", "slider-crank", "--resume", str(tmp_path), "--out", str(tmp_path / "x")]) == 2
     assert "different directories" in capsys.readouterr().err
+    assert main(["optimize", "slider-crank", "--projection-beta", "-1", "--out", str(tmp_path / "y")]) == 2
+    assert "--projection-beta must be >= 0" in capsys.readouterr().err
 
 
 TINY = ["slider-crank", "--nx", "8", "--ny", "2", "--modes", "2", "--t1", "0.2", "--rtol", "1e-6", "--atol", "1e-12",

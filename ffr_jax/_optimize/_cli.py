@@ -24,6 +24,10 @@ _DEFAULTS = {
     "t1": 3.0,
     "rtol": 1e-8,
     "atol": 1e-12,
+    "beta": 0.0,
+    "beta_max": 32.0,
+    "beta_every": 20,
+    "eta": 0.5,
 }
 
 
@@ -48,6 +52,12 @@ def add_optimize_parser(sub) -> None:
     p.add_argument("--move", type=float, help="OC move limit (default 0.05)")
     p.add_argument("--filter-radius", type=float,
                    help="density filter radius in element sizes, 0 = off (default 1.5)")
+    p.add_argument("--projection-beta", dest="beta", type=float,
+                   help="Heaviside projection of the filtered densities, starting sharpness beta_0 (default 0 = "
+                        "no projection); beta doubles every --beta-every steps up to --beta-max")
+    p.add_argument("--beta-max", type=float, help="largest projection sharpness (default 32)")
+    p.add_argument("--beta-every", type=int, help="steps between doublings of beta (default 20)")
+    p.add_argument("--projection-eta", dest="eta", type=float, help="projection threshold eta (default 0.5)")
     p.add_argument("--method", choices=sorted(METHODS),
                    help="sensitivity method (default adjoint)")
     p.add_argument("--out", metavar="DIR", help="output directory of a new run (default optimize-<case>)")
@@ -93,25 +103,36 @@ def _run(args: argparse.Namespace) -> int:
     import ffr_jax as fj
 
     directory, s = _settings(args)
+    if s["beta"] < 0.0:
+        raise ValueError(f"--projection-beta must be >= 0 (0 = no projection), got {s['beta']}.")
     case = fj.cases.slider_crank(nx=s["nx"], ny=s["ny"], n_modes=s["modes"], t1=s["t1"])
     filt = fj.DensityFilter(case.design, s["filter_radius"])
-    constraint = fj.VolumeConstraint(s["volume"], x_min=case.material.x_min, filter=filt)
+    projection, beta = None, None
+    if s["beta"] > 0.0:
+        projection = fj.HeavisideProjection(s["eta"], x_min=case.material.x_min)
+        beta = fj.beta_continuation(s["beta"], max(s["beta_max"], s["beta"]), every=s["beta_every"])
+    constraint = fj.VolumeConstraint(s["volume"], x_min=case.material.x_min, filter=filt, projection=projection)
     if s["optimizer"] == "adam":
         optimizer = optax.adam(s["lr"])
     else:
         optimizer = fj.optimality_criteria(constraint, move=s["move"])
-    fun = fj.make_objective(case, s["method"], filter=filt, rtol=s["rtol"], atol=s["atol"])
+    fun = fj.make_objective(case, s["method"], filter=filt, projection=projection, rtol=s["rtol"], atol=s["atol"])
+    projected = "" if beta is None else f", Heaviside projection beta {s['beta']} -> {s['beta_max']} (x2 every {s['beta_every']})"
     print(f"optimize {s['case']}: {case.mesh.nx} x {case.mesh.ny} elements, {case.n_design} densities, "
-          f"V = {s['volume']}, {s['optimizer']}, filter radius {s['filter_radius']}, {args.iters} steps -> {directory}")
+          f"V = {s['volume']}, {s['optimizer']}, filter radius {s['filter_radius']}{projected}, {args.iters} steps "
+          f"-> {directory}")
     result = optimize(
         fun, case.initial_design(s["volume"]), optimizer, constraint, iterations=args.iters,
         directory=directory, resume=args.resume is not None, checkpoint_every=args.checkpoint_every,
-        config=s, progress=not args.no_progress,
+        config=s, progress=not args.no_progress, beta=beta,
     )
-    x_phys = np.asarray(filt(result.x))
     h = result.history
+    # The last iterate was projected onto the volume with the last step's beta.
+    beta_last = None if beta is None else beta(max(h.steps - 1, 0))
+    x_phys = np.asarray(fj.physical_densities(result.x, filt, projection, beta_last))
     np.savez(directory / "design.npz", x=np.asarray(result.x), x_phys=x_phys, psi=h.value, volume=h.volume,
-             max_change=h.change, config=np.array(json.dumps(s, sort_keys=True)))
+             max_change=h.change, beta=np.array(np.nan if beta_last is None else beta_last),
+             config=np.array(json.dumps(s, sort_keys=True)))
     ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, V = {s['volume']}, {h.steps} steps")
     ax.figure.savefig(directory / "design.png", dpi=150)
     ax = fj.plot_history(h)

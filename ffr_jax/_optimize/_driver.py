@@ -33,7 +33,8 @@ class OptimizeResult(NamedTuple):
 
 def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constraint: VolumeConstraint, *,
              iterations: int, directory=None, resume: bool = False, checkpoint_every: int = 10,
-             config: dict | None = None, progress: bool = True, callback: Callable | None = None) -> OptimizeResult:
+             config: dict | None = None, progress: bool = True, callback: Callable | None = None,
+             beta: float | Callable[[int], float] | None = None) -> OptimizeResult:
     """Run `iterations` steps of [`make_step`][] from `x0`, with a log, checkpoints and progress.
 
     The start design is `x_0 = P(x0)` (the projection onto the volume constraint). With a
@@ -55,6 +56,10 @@ def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constra
       resume with different settings is refused).
     - `progress`: draw a progress line on standard error.
     - `callback`: called as `callback(iteration, x, info)` after each step.
+    - `beta`: the sharpness of the constraint's and `fun`'s [`HeavisideProjection`][], if they
+      have one: a number, or a schedule `k -> beta_k` such as [`beta_continuation`][] (step `k`
+      runs with `beta_k`; the start design is projected with `beta_0`). A schedule is a function
+      of `k` alone, so a resumed run repeats the uninterrupted one.
 
     **Returns:** an [`OptimizeResult`][].
 
@@ -68,8 +73,9 @@ def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constra
     if resume and directory is None:
         raise ValueError("resume=True needs the directory of the run to resume.")
     config = json.loads(json.dumps(config or {}, sort_keys=True))
+    beta_of = _beta_schedule(beta)
 
-    x = constraint.project(jnp.asarray(x0, dtype=jnp.float64))
+    x = constraint.project(jnp.asarray(x0, dtype=jnp.float64), beta_of(0))
     opt_state = optimizer.init(x)
     history = History.empty()
     directory = None if directory is None else Path(directory)
@@ -97,7 +103,7 @@ def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constra
     try:
         for k in range(history.steps, iterations):
             start = time.perf_counter()
-            x_new, opt_state, info = step(x, opt_state)
+            x_new, opt_state, info = step(x, opt_state, beta_of(k))
             value, volume, change = float(info.value), float(info.volume), float(info.change)
             seconds = time.perf_counter() - start
             x = x_new
@@ -117,6 +123,17 @@ def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constra
         if progress and sys.stderr.isatty():
             sys.stderr.write("\n")
     return OptimizeResult(x, opt_state, history)
+
+
+def _beta_schedule(beta) -> Callable:
+    """`k -> beta_k` as a float64 array (`None` when there is no projection); one dtype, so no retrace."""
+    if beta is None:
+        return lambda k: None
+    if callable(beta):
+        return lambda k: jnp.asarray(beta(k), dtype=jnp.float64)
+    if not float(beta) > 0.0:
+        raise ValueError(f"The projection sharpness beta must be positive, got {beta}.")
+    return lambda k: jnp.asarray(float(beta), dtype=jnp.float64)
 
 
 def _save(directory, iteration, x, opt_state, history, config):

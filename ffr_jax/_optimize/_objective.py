@@ -2,36 +2,71 @@
 
 from collections.abc import Callable
 
+import jax
+
 from .. import _api
 from .._case import FlexibleRodCase
 from .._sensitivity._base import AbstractSensitivity
 from ._filter import DensityFilter
+from ._projection import HeavisideProjection
 
 
-def filtered_objective(fun: Callable, filter: DensityFilter | None) -> Callable:
-    """An objective of the design through a density filter, with its gradient pulled back.
+def physical_densities(x, filter: DensityFilter | None, projection: HeavisideProjection | None, beta=None):
+    """The physical densities of a design: `P_beta(H x)`, `H x`, `P_beta(x)` or `x` (whichever map is given).
+
+    **Arguments:**
+    - `x`: `(n_design,)` design; `filter`: a [`DensityFilter`][] or `None`;
+      `projection`: a [`HeavisideProjection`][] or `None`; `beta`: its sharpness (needed with a projection).
+
+    **Returns:** `(n_design,)` physical densities.
+    """
+    x_filtered = x if filter is None else filter(x)
+    if projection is None:
+        return x_filtered
+    if beta is None:
+        raise ValueError("A Heaviside projection needs its sharpness: pass beta (e.g. from fj.beta_continuation).")
+    return projection(x_filtered, beta)
+
+
+def filtered_objective(fun: Callable, filter: DensityFilter | None,
+                       projection: HeavisideProjection | None = None) -> Callable:
+    """An objective of the design through a density filter (and projection), with its gradient pulled back.
 
     For `(psi_phys, g_phys) = fun(x_phys)` returns `x -> (psi_phys(H x), H^T g_phys(H x))`, the
-    value and exact gradient of `psi(x) = psi_phys(H x)`.
+    value and exact gradient of `psi(x) = psi_phys(H x)`. With a projection the physical design is
+    `x_phys = P_beta(H x)` and the function is `(x, beta) -> (psi_phys(x_phys), J^T g_phys(x_phys))`,
+    `J = diag(P_beta'(H x)) H` (the pullback is `jax.vjp` of the same map that made `x_phys`, so
+    value and gradient are consistent).
 
     **Arguments:**
     - `fun`: `x_phys -> (value, grad)` with `grad` shaped like `x_phys`.
-    - `filter`: a [`DensityFilter`][], or `None` for `fun` itself.
+    - `filter`: a [`DensityFilter`][], or `None`.
+    - `projection`: a [`HeavisideProjection`][], or `None` (then the result takes `x` only).
 
-    **Returns:** `x -> (value, grad)` with `grad` shaped like `x`.
+    **Returns:** `x -> (value, grad)` (or `(x, beta) -> (value, grad)` with a projection), with
+    `grad` shaped like `x`.
     """
-    if filter is None:
-        return fun
+    if projection is None:
+        if filter is None:
+            return fun
 
-    def fun_of_design(x):
-        value, grad = fun(filter(x))
-        return value, filter.transpose(grad)
+        def fun_of_design(x):
+            value, grad = fun(filter(x))
+            return value, filter.transpose(grad)
 
-    return fun_of_design
+        return fun_of_design
+
+    def fun_of_projected_design(x, beta):
+        x_phys, pullback = jax.vjp(lambda x: physical_densities(x, filter, projection, beta), x)
+        value, grad = fun(x_phys)
+        return value, pullback(grad)[0]
+
+    return fun_of_projected_design
 
 
 def make_objective(case: FlexibleRodCase, method: str | AbstractSensitivity = "adjoint",
-                   filter: DensityFilter | None = None, **kwargs) -> Callable:
+                   filter: DensityFilter | None = None, projection: HeavisideProjection | None = None,
+                   **kwargs) -> Callable:
     """The objective of a case as a pure function `x -> (psi, grad psi)` for an optax loop.
 
     `psi` is the case's integral objective (REFERENCE_CASE §4) of the physical densities
@@ -44,6 +79,8 @@ def make_objective(case: FlexibleRodCase, method: str | AbstractSensitivity = "a
     - `method`: sensitivity method of `ffr_jax.value_and_grad`: `"adjoint"` (default),
       `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`, or a configured method object.
     - `filter`: a [`DensityFilter`][] or `None`.
+    - `projection`: a [`HeavisideProjection`][] after the filter, or `None`; with one the
+      function is `fun(x, beta)`, `x_phys = P_beta(H x)`.
     - `**kwargs`: passed on to `ffr_jax.value_and_grad`, e.g. `rtol=1e-8, atol=1e-10`.
 
     **Returns:** `fun(x) -> (psi, grad)`, a scalar and an array shaped like `x`.
@@ -59,4 +96,4 @@ def make_objective(case: FlexibleRodCase, method: str | AbstractSensitivity = "a
     def fun(x):
         return _api.value_and_grad(case, x, method, **kwargs)
 
-    return filtered_objective(fun, filter)
+    return filtered_objective(fun, filter, projection)

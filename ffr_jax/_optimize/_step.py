@@ -15,7 +15,8 @@ class StepInfo(NamedTuple):
     """What one step reports.
 
     - `value`: `psi` at the design the step started from.
-    - `volume`: the volume fraction of the new design (`mean(H x_new)` when filtered).
+    - `volume`: the volume fraction of the new design (`mean(H x_new)` when filtered,
+      `mean(P_beta(H x_new))` when projected).
     - `change`: `max_e |x_new_e - x_e|`.
     """
 
@@ -25,19 +26,22 @@ class StepInfo(NamedTuple):
 
 
 def make_step(fun: Callable, optimizer: optax.GradientTransformation, constraint: VolumeConstraint) -> Callable:
-    """A jit-compiled step `step(x, opt_state) -> (x_new, opt_state, info)`.
+    """A jit-compiled step `step(x, opt_state, beta=None) -> (x_new, opt_state, info)`.
 
-    `(psi, g) = fun(x)`; `updates, opt_state = optimizer.update(g, opt_state, x)`;
+    `(psi, g) = fun(x)` (or `fun(x, beta)` when `beta` is given: a projected design, see
+    [`HeavisideProjection`][]); `updates, opt_state = optimizer.update(g, opt_state, x)`;
     `x_new = P(x + updates)` with `P` the projection onto the volume constraint
     ([`VolumeConstraint.project`][]), so every iterate satisfies `x_min <= x <= 1` and
     `mean(c x) = V`. The step is compiled on its first call and reused for every later one as
-    long as `x` and `opt_state` keep their shapes and dtypes (which an optax loop does).
+    long as `x` and `opt_state` keep their shapes and dtypes (which an optax loop does); `beta`
+    is a traced argument, so a continuation that raises it does not recompile.
 
     **Arguments:**
-    - `fun`: `x -> (value, grad)`, e.g. [`make_objective`][] or `jax.value_and_grad(f)`.
+    - `fun`: `x -> (value, grad)`, e.g. [`make_objective`][] or `jax.value_and_grad(f)`; with a
+      projection `(x, beta) -> (value, grad)`.
     - `optimizer`: any `optax.GradientTransformation` (`optax.adam(1e-2)`,
       [`optimality_criteria`][], ...); it is given `x` as `params`.
-    - `constraint`: the [`VolumeConstraint`][].
+    - `constraint`: the [`VolumeConstraint`][] (with the same projection as `fun`, if any).
 
     **Returns:** `step`, with `opt_state = optimizer.init(x)` to start.
 
@@ -53,15 +57,15 @@ def make_step(fun: Callable, optimizer: optax.GradientTransformation, constraint
     """
 
     @jax.jit
-    def step(x, opt_state):
-        value, grad = fun(x)
+    def step(x, opt_state, beta=None):
+        value, grad = fun(x) if beta is None else fun(x, beta)
         # optax mixes Python floats with int32 counters (adam's `decay ** count`), which strict
         # dtype promotion refuses; the optimizer's own arithmetic runs under standard promotion.
         with jax.numpy_dtype_promotion("standard"):
             updates, opt_state = optimizer.update(grad, opt_state, x)
             y = optax.apply_updates(x, updates)
-        x_new = constraint.project(y)
-        info = StepInfo(value=value, volume=constraint.fraction(x_new), change=jnp.max(jnp.abs(x_new - x)))
+        x_new = constraint.project(y, beta)
+        info = StepInfo(value=value, volume=constraint.fraction(x_new, beta), change=jnp.max(jnp.abs(x_new - x)))
         return x_new, opt_state, info
 
     return step
