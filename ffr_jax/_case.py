@@ -34,7 +34,8 @@ class FlexibleRodCase(eqx.Module):
       redundant initial state; `jump_ts`: times where drivers switch pieces.
     - `fe_path`: `"dense"` (dense `K`, `M` and a full eigen-solution), `"sparse"` (matrix-free
       `K`, `M`, shift-invert Lanczos; for large meshes) or `"auto"` (sparse above
-      `SPARSE_MIN_DOF` = 5,000 degrees of freedom). Both give the same numbers and gradients.
+      `SPARSE_MIN_DOF` = 1,000 degrees of freedom, so the reference rod is sparse). Both give the
+      same numbers and gradients; only the dense path supports forward mode (`jax.jvp`) in `x`.
     """
 
     design: RodDesign

@@ -212,7 +212,8 @@ def test_sparse_psi_and_gradient_match_dense(scene_gradient):
 
 
 def test_fe_path_is_chosen_by_size_and_can_be_overridden():
-    assert resolve_fe_path("auto", RodMesh(100, 6)) == "dense", "the reference rod stays dense"
+    assert resolve_fe_path("auto", RodMesh(20, 4)) == "dense", "small meshes stay dense"
+    assert resolve_fe_path("auto", RodMesh(100, 6)) == "sparse", "the reference rod (1,414 dofs) is sparse"
     big = RodMesh(400, 6)
     assert big.n_dof > SPARSE_MIN_DOF and resolve_fe_path("auto", big) == "sparse"
     assert resolve_fe_path("dense", big) == "dense" and resolve_fe_path("sparse", RodMesh(4, 2)) == "sparse"

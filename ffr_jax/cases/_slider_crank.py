@@ -82,8 +82,9 @@ def slider_crank(
     - `nx`, `ny`: mesh of the rod (`ny` even, `nx >= 4`); `n_modes`: retained modes; `t1`: end time.
     - `eccentricity`, `speed`, `t_ramp`: crank; `length`, `height`, `thickness`: rod.
     - `material`: the SIMP law (defaults of REFERENCE_CASE §1).
-    - `fe_path`: `"auto"` (default: sparse FE above 5,000 degrees of freedom, e.g. meshes up to
-      1000 x 100 and beyond), `"dense"` or `"sparse"`; both paths give the same numbers.
+    - `fe_path`: `"auto"` (default: sparse FE above 1,000 degrees of freedom, i.e. the reference
+      100 x 6 rod and up to 1000 x 100 and beyond), `"dense"` or `"sparse"`; both paths give the
+      same numbers. Forward mode (`jax.jvp`) with respect to `x` needs `"dense"`.
 
     **Returns:** a [`FlexibleRodCase`][].
     """
