@@ -175,7 +175,8 @@ def _reduced_table(directory: pathlib.Path) -> list[str]:
         return []
     rows = ["", "How the strategy was chosen: each candidate run on a reduced case with "
             "`python benchmarks/bench_optimize.py --nx 50 --ny 6 --t1 1.0 --method autodiff --iters 100 ... "
-            f"--out benchmarks/results/{directory.name}/NAME` (same filter, rtol 1e-8 in the loop):", "",
+            f"--out benchmarks/results/{directory.name}/NAME` (same filter, rtol 1e-8 in the loop; wall times "
+            "under different loads of the shared machine, not comparable to each other):", "",
             "| run | optimizer | projection | iterations | ratio to uniform | intermediate 0.1-0.9 | wall time |",
             "|---|---|---|---:|---:|---:|---:|"]
     for path in summaries:
