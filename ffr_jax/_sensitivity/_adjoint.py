@@ -137,10 +137,7 @@ def adjoint_products(case: FlexibleRodCase, t, y, z, scene: Scene, mu, w, *, des
         s = eqx.combine(dyn_, static)
         return jnp.sum(nu * ode(y_r, z_r, s)[0]) - jnp.sum(mu * v(y_r, z_r)) - f(y_r, s)
 
-    if design:
-        phi_y, phi_z, lam_p = jax.grad(phi, argnums=(0, 1, 2))(y_r, z_r, dyn)
-    else:
-        (phi_y, phi_z), lam_p = jax.grad(phi, argnums=(0, 1))(y_r, z_r, dyn), None
+    phi_y, phi_z, lam_p = jax.grad(phi, argnums=(0, 1, 2))(y_r, z_r, dyn)
 
     lam_y, lam_z = model.split(phi_y)[0], model.split(phi_z)[0]
     if model.partition.dependent:
@@ -156,7 +153,7 @@ def adjoint_products(case: FlexibleRodCase, t, y, z, scene: Scene, mu, w, *, des
             _, c_pull = jax.vjp(lambda d: c(y_r, eqx.combine(d, static)), dyn)
             (c_p_e,) = c_pull(e)
             lam_p = jax.tree_util.tree_map(lambda a, g, h: a - g - h, lam_p, cdot_p_b, c_p_e)
-    return lam_y, lam_z, nu, lam_p
+    return lam_y, lam_z, nu, lam_p if design else None
 
 
 def gauss_legendre(order: int):
