@@ -195,7 +195,8 @@ def main(argv=None):
     device = jax.devices()[0]
     header = [
         f"Case: slider-crank {args.nx} x {args.ny}, {args.modes} modes, t1 = {args.t1} s, x = {args.value} "
-        f"({case.n_design} design variables, {flat.size} scene parameters); forward Tsit5 rtol {args.rtol:g} / "
+        f"({case.n_design} design variables, {flat.size} scene parameters, {'sparse' if case.sparse_fe else 'dense'} FE path); "
+        f"forward Dopri8 (the default solver) rtol {args.rtol:g} / "
         f"atol {args.atol:g} ({steps} steps); adjoint and backsolve backward rtol {args.backward_rtol:g} / "
         f"atol {args.backward_atol:g}.",
         f"Machine: {device.platform}, {os.cpu_count()} CPUs shared with other sessions (load average at the end "
