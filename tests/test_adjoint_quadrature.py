@@ -136,6 +136,17 @@ def test_quadrature_error_falls_with_the_number_of_nodes(quadrature_gradients, s
     assert errors[3] < 1e-3 * errors[1], f"relative error vs the in-ODE gradient by number of nodes: {errors}"
 
 
+def test_paper_matrices_in_the_backward_ode_give_the_same_gradient(case, scene, solves):
+    """The paper's literal form — `R1, S1, S2, T1, T2` from `jax.jacfwd` in eq. 43 and `G` integrated
+    in the backward ODE (eq. 44) — against the default reverse-mode products, both in the ODE."""
+    _, g_ode = solves
+    paper = fj.Adjoint(**BACKWARD, quadrature=None, products="matrices")
+    run = eqx.filter_jit(lambda s: paper.value_and_grad_scene(case, s, rtol=RTOL, atol=ATOL, solver=None,
+                                                              max_steps=20_000))
+    g = jax.flatten_util.ravel_pytree(eqx.filter(run(scene)[1], eqx.is_inexact_array))[0]
+    assert_close_relative(np.asarray(g), g_ode, 1e-9, "gradient with the paper's jacfwd matrices vs reverse-mode products")
+
+
 def test_gauss_legendre_rule_is_exact_to_degree_2n_minus_1():
     for n in (1, 2, 3, 5):
         nodes, weights = gauss_legendre(n)
@@ -144,7 +155,7 @@ def test_gauss_legendre_rule_is_exact_to_degree_2n_minus_1():
                                        err_msg=f"{n}-point rule, degree {degree}")
 
 
-@pytest.mark.parametrize("bad", [dict(quadrature=0), dict(quadrature=True), dict(chunk=0)])
+@pytest.mark.parametrize("bad", [dict(quadrature=0), dict(quadrature=True), dict(chunk=0), dict(products="forward")])
 def test_bad_options_are_clear_errors(bad):
     with pytest.raises(ValueError, match="Adjoint"):
         fj.Adjoint(**bad)

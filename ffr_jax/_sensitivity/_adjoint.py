@@ -236,6 +236,10 @@ class Adjoint(AbstractSensitivity):
     - `quadrature`: Gauss–Legendre nodes per backward step (default 3: exact for polynomials of
       degree 5 on each step), or `None`.
     - `chunk`: backward steps per vectorised quadrature batch.
+    - `products`: how the right-hand side of eq. 43 is formed: `"reverse"` (default: one reverse
+      pass, [`adjoint_products`][]) or `"matrices"` (the paper's matrices `R1, S1, S2, T1, T2` from
+      `jax.jacfwd`, [`adjoint_terms`][], multiplied out; the same numbers, about 6x the cost per
+      evaluation on the reference case). The design term is one VJP in both.
     - `max_steps`: step budget of the backward solve, whose dense output holds that many steps
       (default: the forward budget).
 
@@ -250,6 +254,7 @@ class Adjoint(AbstractSensitivity):
     solver: diffrax.AbstractSolver | None = None
     quadrature: int | None = 3
     chunk: int = 256
+    products: str = eqx.field(static=True, default="reverse")
     max_steps: int | None = None
 
     def __check_init__(self):
@@ -260,6 +265,8 @@ class Adjoint(AbstractSensitivity):
                              f"got {self.quadrature!r}.")
         if isinstance(self.chunk, bool) or not isinstance(self.chunk, int) or self.chunk < 1:
             raise ValueError(f"Adjoint(chunk=...) must be a positive number of backward steps, got {self.chunk!r}.")
+        if self.products not in ("reverse", "matrices"):
+            raise ValueError(f"Adjoint(products=...) must be 'reverse' or 'matrices', got {self.products!r}.")
 
     def backward_solve(self, case: FlexibleRodCase, scene: Scene, forward, *, solver=None, max_steps: int):
         """The backward solve of paper eq. 43 on the forward trajectory `forward` (dense).
@@ -275,7 +282,15 @@ class Adjoint(AbstractSensitivity):
 
         def field(t, state, args):
             y, z = dense.evaluate(t)[:2]
-            lam_y, lam_z, _, lam_p = adjoint_products(case, t, y, z, scene, state[0], state[1], design=in_ode)
+            if self.products == "matrices":
+                mu, w = state[0], state[1]
+                terms = adjoint_terms(case, t, y, z, scene)
+                nu = spd_solve(terms.mbar, w)
+                lam_y = matmul(terms.s1.T, mu) + matmul(terms.t1.T, nu) - terms.r1
+                lam_z = matmul(terms.s2.T, mu) + matmul(terms.t2.T, nu)
+                lam_p = adjoint_products(case, t, y, z, scene, mu, w, design=True)[3] if in_ode else None
+            else:
+                lam_y, lam_z, _, lam_p = adjoint_products(case, t, y, z, scene, state[0], state[1], design=in_ode)
             if in_ode:
                 return lam_y, lam_z, jax.flatten_util.ravel_pytree(lam_p)[0]
             return lam_y, lam_z
