@@ -83,7 +83,7 @@ def main():
         "",
         f"- device: {device.platform} ({device.device_kind}), {platform.processor() or platform.machine()}, "
         f"jax {jax.__version__}",
-        f"- {case.mesh.n_dof} degrees of freedom (dense matrices), design x = 0.5 everywhere",
+        f"- {case.mesh.n_dof} degrees of freedom ({'sparse path: matrix-free K, M, shift-invert Lanczos' if case.sparse_fe else 'dense path'}), design x = 0.5 everywhere",
         f"- median of {args.runs} runs after one warm-up; case construction (not timed below): {build_s:.1f} s",
         f"- load average at the end (1/5/15 min): {', '.join(f'{v:.1f}' for v in os.getloadavg())} "
         f"on {os.cpu_count()} CPUs (shared machines make run times noisy); "
