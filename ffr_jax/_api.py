@@ -75,7 +75,7 @@ def value_and_grad(case: FlexibleRodCase, x: Design, method: str | AbstractSensi
     - `max_steps`: step budget of each solve. The adjoint method keeps the dense output of its
       forward and backward solves for that many steps (about 1 KB per step each; the reference
       case needs about 8,000 forward and 13,000 backward steps), so the default is 200,000 rather
-      than the 1,000,000 of [`objective`][]: raise it for long horizons or loose-order solvers.
+      than the 1,000,000 of [`objective`][]: raise it for long horizons or low-order solvers.
 
     **Returns:** `(psi, grad)`, a scalar and an array shaped like `x`. Works under `jax.jit`
     and `jax.vmap` (a batch of designs).
