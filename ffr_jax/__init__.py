@@ -41,10 +41,16 @@ from ._sparse_fe import ElementOperator as ElementOperator, sparse_mass_matrix a
 from ._sparse_modes import sparse_hinged_modes as sparse_hinged_modes
 from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state, simulate as simulate
 from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
-from ._optimize._driver import OptimizeResult as OptimizeResult, optimize as optimize
+from ._optimize._constraint import AbstractDesignConstraint as AbstractDesignConstraint
+from ._optimize._driver import ConstraintViolationWarning as ConstraintViolationWarning, OptimizeResult as OptimizeResult, optimize as optimize
 from ._optimize._filter import DensityFilter as DensityFilter
+from ._optimize._frequency import FrequencyConstraint as FrequencyConstraint
+from ._optimize._function_constraint import FunctionConstraint as FunctionConstraint
 from ._optimize._history import History as History
+from ._optimize._mass import MassConstraint as MassConstraint
+from ._optimize._mma import MMA as MMA, MMAState as MMAState
 from ._optimize._oc import optimality_criteria as optimality_criteria
+from ._optimize._optimizer import AbstractOptimizer as AbstractOptimizer, ProjectedOptax as ProjectedOptax
 from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective, physical_densities as physical_densities
 from ._optimize._projection import HeavisideProjection as HeavisideProjection, beta_continuation as beta_continuation
 from ._optimize._plot import plot_design as plot_design, plot_history as plot_history

@@ -369,7 +369,8 @@ def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name, projecte
     assert fj.load_checkpoint(tmp_path / "cut" / "checkpoint.npz").iteration == 4
     resumed = run(tmp_path / "cut", name, 12, resume=True, projected=projected)
     np.testing.assert_array_equal(resumed.x, whole.x, err_msg="final design")
-    for got, expected, quantity in zip(resumed.history, whole.history, ("psi", "volume", "max change"), strict=True):
+    for got, expected, quantity in zip(resumed.history, whole.history,
+                                       ("psi", "volume", "max change", "constraints", "names"), strict=True):
         np.testing.assert_array_equal(got, expected, err_msg=f"history of {quantity}")
     for got, expected in zip(jax.tree.leaves(resumed.opt_state), jax.tree.leaves(whole.opt_state), strict=True):
         np.testing.assert_array_equal(got, expected, err_msg="optimizer state")

@@ -1,6 +1,6 @@
-"""One optimisation step: any optax transformation followed by the volume projection."""
+"""One optimisation step: evaluate the objective and the constraints, then update the design."""
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import jax
@@ -8,6 +8,8 @@ import jax.numpy as jnp
 import optax
 from jaxtyping import Array, Float
 
+from ._constraint import AbstractDesignConstraint
+from ._optimizer import AbstractOptimizer, ProjectedOptax
 from ._volume import VolumeConstraint
 
 
@@ -16,34 +18,93 @@ class StepInfo(NamedTuple):
 
     - `value`: `psi` at the design the step started from.
     - `volume`: the volume fraction of the new design (`mean(H x_new)` when filtered,
-      `mean(P_beta(H x_new))` when projected).
+      `mean(P_beta(H x_new))` when projected; NaN when the run has no [`VolumeConstraint`][]).
     - `change`: `max_e |x_new_e - x_e|`.
+    - `constraints`: `(m,)` the normalised constraint values `g_i` at the design the step started
+      from (empty for Adam and OC, which hold the volume by projection).
     """
 
     value: Float[Array, ""]
     volume: Float[Array, ""]
     change: Float[Array, ""]
+    constraints: Float[Array, " m"]
 
 
-def make_step(fun: Callable, optimizer: optax.GradientTransformation, constraint: VolumeConstraint) -> Callable:
-    """A jit-compiled step `step(x, opt_state, beta=None) -> (x_new, opt_state, info)`.
+def as_optimizer(optimizer, constraints) -> tuple[AbstractOptimizer, tuple[AbstractDesignConstraint, ...]]:
+    """The update rule and the inequality constraints it takes, from what a user passes.
+
+    - an `optax.GradientTransformation` (Adam, [`optimality_criteria`][]) with one
+      [`VolumeConstraint`][]: the transformation followed by the projection onto the volume
+      ([`ProjectedOptax`][]), no inequality constraint;
+    - a [`ProjectedOptax`][] with no constraints (or its own volume constraint);
+    - an optimizer that takes constraints ([`MMA`][]) with a constraint or a sequence of them,
+      each an [`AbstractDesignConstraint`][] (the volume among them as an inequality).
+    """
+    if isinstance(constraints, AbstractDesignConstraint):
+        constraints = (constraints,)
+    constraints = () if constraints is None else tuple(constraints)
+    for c in constraints:
+        if not isinstance(c, AbstractDesignConstraint):
+            raise ValueError(f"Constraints must be fj.VolumeConstraint, fj.MassConstraint, fj.FrequencyConstraint, "
+                             f"fj.FunctionConstraint or another AbstractDesignConstraint, got {type(c).__name__}.")
+    if isinstance(optimizer, optax.GradientTransformation):
+        if len(constraints) != 1 or not isinstance(constraints[0], VolumeConstraint):
+            raise ValueError(
+                "An optax optimizer (Adam, optimality criteria) holds exactly one constraint, the volume, by "
+                f"projecting every iterate onto it; got {[type(c).__name__ for c in constraints]}. For further "
+                "constraints (mass, frequency, a function of the design) use fj.MMA()."
+            )
+        return ProjectedOptax(optimizer, constraints[0]), ()
+    if isinstance(optimizer, ProjectedOptax):
+        if constraints not in ((), (optimizer.volume,)):
+            raise ValueError("ProjectedOptax holds its own volume constraint and takes no other; use fj.MMA() for "
+                             "further constraints.")
+        return optimizer, ()
+    if isinstance(optimizer, AbstractOptimizer):
+        return optimizer, constraints
+    raise ValueError(f"Unknown optimizer {type(optimizer).__name__}: pass an optax.GradientTransformation "
+                     "(e.g. optax.adam(0.02), fj.optimality_criteria(volume)) or fj.MMA().")
+
+
+def volume_of(optimizer: AbstractOptimizer, constraints: Sequence[AbstractDesignConstraint]) -> VolumeConstraint | None:
+    """The run's volume constraint (the projection's, or the first among the inequalities), if any."""
+    if isinstance(optimizer, ProjectedOptax):
+        return optimizer.volume
+    return next((c for c in constraints if isinstance(c, VolumeConstraint)), None)
+
+
+def evaluate_constraints(constraints: Sequence[AbstractDesignConstraint], x, beta):
+    """`(g, dg/dx)`: `(m,)` values and `(m, n)` gradients of the constraints at `x`."""
+    if not constraints:
+        return jnp.zeros((0,), x.dtype), jnp.zeros((0, x.shape[0]), x.dtype)
+    values, grads = zip(*(c.value_and_grad(x, beta) for c in constraints), strict=True)
+    return jnp.stack([jnp.asarray(v, dtype=x.dtype) for v in values]), jnp.stack(grads)
+
+
+def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
+    """A jit-compiled step `step(x, state, beta=None) -> (x_new, state, info)`.
 
     `(psi, g) = fun(x)` (or `fun(x, beta)` when `beta` is given: a projected design, see
-    [`HeavisideProjection`][]); `updates, opt_state = optimizer.update(g, opt_state, x)`;
-    `x_new = P(x + updates)` with `P` the projection onto the volume constraint
-    ([`VolumeConstraint.project`][]), so every iterate satisfies `x_min <= x <= 1` and
-    `mean(c x) = V`. The step is compiled on its first call and reused for every later one as
-    long as `x` and `opt_state` keep their shapes and dtypes (which an optax loop does); `beta`
-    is a traced argument, so a continuation that raises it does not recompile.
+    [`HeavisideProjection`][]); with an optax optimizer
+    `updates, state = optimizer.update(g, state, x)`, `x_new = P(x + updates)` with `P` the
+    projection onto the volume constraint ([`VolumeConstraint.project`][]), so every iterate
+    satisfies `x_min <= x <= 1` and `mean(c x) = V`; with [`MMA`][] the constraints `g_i` and
+    their gradients are evaluated at `x` too and MMA's subproblem gives `x_new`. The step is
+    compiled on its first call and reused for every later one as long as `x` and `state` keep
+    their shapes and dtypes (which the loop does); `beta` is a traced argument, so a continuation
+    that raises it does not recompile.
 
     **Arguments:**
     - `fun`: `x -> (value, grad)`, e.g. [`make_objective`][] or `jax.value_and_grad(f)`; with a
       projection `(x, beta) -> (value, grad)`.
-    - `optimizer`: any `optax.GradientTransformation` (`optax.adam(1e-2)`,
-      [`optimality_criteria`][], ...); it is given `x` as `params`.
-    - `constraint`: the [`VolumeConstraint`][] (with the same projection as `fun`, if any).
+    - `optimizer`: an `optax.GradientTransformation` (`optax.adam(1e-2)`,
+      [`optimality_criteria`][], ...; it is given `x` as `params`), or [`MMA`][].
+    - `constraints`: the [`VolumeConstraint`][] (with the same projection as `fun`, if any) for an
+      optax optimizer; for MMA any sequence of constraints ([`VolumeConstraint`][],
+      [`MassConstraint`][], [`FrequencyConstraint`][], [`FunctionConstraint`][]).
 
-    **Returns:** `step`, with `opt_state = optimizer.init(x)` to start.
+    **Returns:** `step`, with `state = step.optimizer.init(x)` to start (`step.optimizer` is the
+    update rule, `step.constraints` the inequality constraints).
 
     **Example:**
     ```python
@@ -55,17 +116,18 @@ def make_step(fun: Callable, optimizer: optax.GradientTransformation, constraint
         x, state, info = step(x, state)
     ```
     """
+    optimizer, constraints = as_optimizer(optimizer, constraints)
+    volume = volume_of(optimizer, constraints)
 
     @jax.jit
-    def step(x, opt_state, beta=None):
+    def step(x, state, beta=None):
         value, grad = fun(x) if beta is None else fun(x, beta)
-        # optax mixes Python floats with int32 counters (adam's `decay ** count`), which strict
-        # dtype promotion refuses; the optimizer's own arithmetic runs under standard promotion.
-        with jax.numpy_dtype_promotion("standard"):
-            updates, opt_state = optimizer.update(grad, opt_state, x)
-            y = optax.apply_updates(x, updates)
-        x_new = constraint.project(y, beta)
-        info = StepInfo(value=value, volume=constraint.fraction(x_new, beta), change=jnp.max(jnp.abs(x_new - x)))
-        return x_new, opt_state, info
+        g, dg = evaluate_constraints(constraints, x, beta)
+        x_new, state = optimizer.update(x, state, value, grad, g, dg, beta)
+        fraction = jnp.full((), jnp.nan, x.dtype) if volume is None else volume.fraction(x_new, beta)
+        info = StepInfo(value=value, volume=fraction, change=jnp.max(jnp.abs(x_new - x)), constraints=g)
+        return x_new, state, info
 
+    step.optimizer = optimizer
+    step.constraints = constraints
     return step

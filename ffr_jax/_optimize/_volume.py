@@ -6,12 +6,13 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._typing import Design, Scalar
+from ._constraint import AbstractDesignConstraint, status
 from ._filter import DensityFilter
 from ._projection import HeavisideProjection
 
 
-class VolumeConstraint(eqx.Module):
-    """The feasible designs `{x : x_min <= x <= 1, mean(c x) = V}`.
+class VolumeConstraint(AbstractDesignConstraint):
+    """The feasible designs `{x : x_min <= x <= 1, mean(c x) = V}`, or the inequality `mean(c x) <= V`.
 
     `c` are the volume weights of the design variables. Without a filter `c = 1` and the
     constraint is `mean(x) = V`. With a density filter `c = H^T 1`, so that the constraint holds
@@ -30,6 +31,7 @@ class VolumeConstraint(eqx.Module):
     - `projection`: the [`HeavisideProjection`][] after the filter, if any.
     - `iterations`: bisection steps of [`VolumeConstraint.project`][] (100 reach the float64
       resolution of the multiplier from any bracket the design can produce).
+    - `name`: the label of the constraint in logs and plots.
     """
 
     volume: float = eqx.field(static=True)
@@ -38,9 +40,10 @@ class VolumeConstraint(eqx.Module):
     weights: Float[Array, " n_design"] | None
     filter: DensityFilter | None
     projection: HeavisideProjection | None
+    name: str = eqx.field(static=True)
 
     def __init__(self, volume: float, *, x_min: float = 0.01, filter: DensityFilter | None = None,
-                 projection: HeavisideProjection | None = None, iterations: int = 100):
+                 projection: HeavisideProjection | None = None, iterations: int = 100, name: str = "volume"):
         if not 0.0 < x_min < 1.0:
             raise ValueError(f"x_min must lie in (0, 1), got {x_min}.")
         if not x_min < volume <= 1.0:
@@ -56,6 +59,7 @@ class VolumeConstraint(eqx.Module):
         self.weights = None if filter is None else filter.volume_weights()
         self.filter = filter
         self.projection = projection
+        self.name = name
 
     def _check_beta(self, beta):
         if self.projection is not None and beta is None:
@@ -71,6 +75,14 @@ class VolumeConstraint(eqx.Module):
             x_filtered = x if self.filter is None else self.filter(x)
             return jnp.mean(self.projection(x_filtered, beta))
         return jnp.mean(x if self.weights is None else self.weights * x)
+
+    def value_and_grad(self, x: Design, beta: Scalar | float | None = None):
+        """`(g, dg/dx)` of the inequality `g(x) = fraction(x) / V - 1 <= 0`."""
+        fraction, grad = jax.value_and_grad(lambda x: self.fraction(x, beta))(x)
+        return fraction / self.volume - 1.0, grad / self.volume
+
+    def describe(self, g: float) -> str:
+        return f"volume fraction {self.volume * (1.0 + g):.6f} (bound <= {self.volume:g}): {status(g)}"
 
     def project(self, y: Design, beta: Scalar | float | None = None) -> Design:
         """Euclidean projection of `y` onto the feasible set (without a Heaviside projection).
