@@ -300,7 +300,7 @@ def test_step_compiles_once(name):
     for _ in range(6):
         x, state, _ = step(x, state)
     assert len(traces) == 1, f"the step was traced {len(traces)} times"
-    assert step._cache_size() == 1
+    assert step.objective._cache_size() == 1 and step.advance._cache_size() == 1
 
 
 @pytest.mark.parametrize("name", ["adam", "oc"])

@@ -39,7 +39,7 @@ class FunctionConstraint(AbstractDesignConstraint):
     scale: float = eqx.field(static=True)
     name: str = eqx.field(static=True)
 
-    def __init__(self, fun: Callable, bound: float, *, lower: bool = False, scale: float | None = None,
+    def __init__(self, fun, bound: float, *, lower: bool = False, scale: float | None = None,
                  name: str = "function"):
         if not callable(fun):
             raise ValueError(f"FunctionConstraint needs a function x -> (value, grad), got {type(fun).__name__}.")

@@ -82,17 +82,18 @@ def evaluate_constraints(constraints: Sequence[AbstractDesignConstraint], x, bet
 
 
 def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
-    """A jit-compiled step `step(x, state, beta=None) -> (x_new, state, info)`.
+    """A compiled step `step(x, state, beta=None) -> (x_new, state, info)`.
 
     `(psi, g) = fun(x)` (or `fun(x, beta)` when `beta` is given: a projected design, see
     [`HeavisideProjection`][]); with an optax optimizer
     `updates, state = optimizer.update(g, state, x)`, `x_new = P(x + updates)` with `P` the
     projection onto the volume constraint ([`VolumeConstraint.project`][]), so every iterate
     satisfies `x_min <= x <= 1` and `mean(c x) = V`; with [`MMA`][] the constraints `g_i` and
-    their gradients are evaluated at `x` too and MMA's subproblem gives `x_new`. The step is
-    compiled on its first call and reused for every later one as long as `x` and `state` keep
-    their shapes and dtypes (which the loop does); `beta` is a traced argument, so a continuation
-    that raises it does not recompile.
+    their gradients are evaluated at `x` too and MMA's subproblem gives `x_new`. The step is two
+    jit-compiled programs, `step.objective` (`fun`) and `step.advance` (constraints and update),
+    each compiled on its first call and reused for every later one as long as `x` and `state`
+    keep their shapes and dtypes (which the loop does); `beta` is a traced argument, so a
+    continuation that raises it does not recompile.
 
     **Arguments:**
     - `fun`: `x -> (value, grad)`, e.g. [`make_objective`][] or `jax.value_and_grad(f)`; with a
@@ -104,7 +105,8 @@ def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
       [`MassConstraint`][], [`FrequencyConstraint`][], [`FunctionConstraint`][]).
 
     **Returns:** `step`, with `state = step.optimizer.init(x)` to start (`step.optimizer` is the
-    update rule, `step.constraints` the inequality constraints).
+    update rule, `step.constraints` the inequality constraints; for an optax optimizer its own
+    `init` gives the same state).
 
     **Example:**
     ```python
@@ -119,15 +121,23 @@ def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
     optimizer, constraints = as_optimizer(optimizer, constraints)
     volume = volume_of(optimizer, constraints)
 
+    # Two programs: the objective alone, and constraints + update. The objective (a simulation and
+    # its gradient) dominates compile time; compiled alone its program depends only on `fun`, so
+    # runs with other optimizers or constraints find it in JAX's persistent compilation cache.
+    objective = jax.jit(lambda x, beta: fun(x) if beta is None else fun(x, beta))
+
     @jax.jit
-    def step(x, state, beta=None):
-        value, grad = fun(x) if beta is None else fun(x, beta)
+    def advance(x, state, value, grad, beta):
         g, dg = evaluate_constraints(constraints, x, beta)
         x_new, state = optimizer.update(x, state, value, grad, g, dg, beta)
         fraction = jnp.full((), jnp.nan, x.dtype) if volume is None else volume.fraction(x_new, beta)
         info = StepInfo(value=value, volume=fraction, change=jnp.max(jnp.abs(x_new - x)), constraints=g)
         return x_new, state, info
 
-    step.optimizer = optimizer
-    step.constraints = constraints
+    def step(x, state, beta=None):
+        value, grad = objective(x, beta)
+        return advance(x, state, value, grad, beta)
+
+    step.objective, step.advance = objective, advance
+    step.optimizer, step.constraints = optimizer, constraints
     return step
