@@ -42,7 +42,8 @@ def surrogate(n, seed=0):
 
 
 def optimizers(constraint):
-    return {"adam": optax.adam(0.05), "oc": fj.optimality_criteria(constraint, move=0.1)}
+    return {"adam": optax.adam(0.05), "oc": fj.optimality_criteria(constraint, move=0.1),
+            "mma": fj.MMA(constraint.x_min, move=0.2)}
 
 
 # --- density filter ----------------------------------------------------------------------------
@@ -334,17 +335,24 @@ def test_projected_volume_holds_after_every_update_through_a_continuation(name):
 
 
 # --- driver, log and checkpoints ----------------------------------------------------------------
-def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLUME, every=4, projected=False):
-    filt = fj.DensityFilter(small_design(), 1.5)
+def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLUME, every=4, projected=False,
+        extra=False, **kwargs):
+    """A run on the surrogate; `extra`: MMA with a mass bound and a function constraint beside the volume."""
+    design = small_design()
+    filt = fj.DensityFilter(design, 1.5)
     _, value_and_grad = surrogate(filt.weights.shape[0])
     projection = fj.HeavisideProjection(x_min=X_MIN) if projected else None
     beta = fj.beta_continuation(1.0, 8.0, every=3) if projected else None
     constraint = fj.VolumeConstraint(volume, filter=filt, projection=projection)
+    constraints = constraint
+    if extra:
+        spread = fj.FunctionConstraint(lambda x, *beta: (jnp.sum((x - 0.5) ** 2), 2 * (x - 0.5)), 2.0, name="spread")
+        constraints = (constraint, fj.MassConstraint(design, 2.5, filter=filt, projection=projection), spread)
     return fj.optimize(
         fj.filtered_objective(value_and_grad, filt, projection), jnp.full(filt.weights.shape[0], volume),
-        optimizers(constraint)[name], constraint, iterations=iterations, directory=directory, resume=resume,
+        optimizers(constraint)[name], constraints, iterations=iterations, directory=directory, resume=resume,
         checkpoint_every=every, config={"optimizer": name, "volume": volume}, progress=False, callback=callback,
-        beta=beta,
+        beta=beta, **kwargs,
     )
 
 
@@ -360,14 +368,20 @@ def interrupt_at(k):
     return callback
 
 
-@pytest.mark.parametrize("name,projected", [("adam", False), ("oc", False), ("adam", True)])
-def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name, projected):
-    # Projected: beta doubles every 3 steps, so the resumed part (steps 4-11) crosses raises.
-    whole = run(tmp_path / "whole", name, 12, projected=projected)
+@pytest.mark.parametrize("name,projected,extra", [("adam", False, False), ("oc", False, False), ("adam", True, False),
+                                                  ("mma", False, False), ("mma", True, True)])
+def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name, projected, extra):
+    # Projected: beta doubles every 3 steps, so the resumed part (steps 4-11) crosses raises. MMA keeps
+    # x_{k-1}, x_{k-2} and the asymptotes in its state: the resumed updates must use the stored ones.
+    whole = run(tmp_path / "whole", name, 12, projected=projected, extra=extra)
     with pytest.raises(Interrupt):  # after 6 steps; the last checkpoint holds 4
-        run(tmp_path / "cut", name, 12, callback=interrupt_at(5), projected=projected)
+        run(tmp_path / "cut", name, 12, callback=interrupt_at(5), projected=projected, extra=extra)
     assert fj.load_checkpoint(tmp_path / "cut" / "checkpoint.npz").iteration == 4
-    resumed = run(tmp_path / "cut", name, 12, resume=True, projected=projected)
+    resumed = run(tmp_path / "cut", name, 12, resume=True, projected=projected, extra=extra)
+    if name == "mma":
+        expected_names = ("volume", "mass", "spread") if extra else ("volume",)
+        assert resumed.history.names == expected_names and resumed.history.constraint_values.shape == (12, len(expected_names))
+        np.testing.assert_array_equal(resumed.constraints, whole.constraints, err_msg="constraints at the end")
     np.testing.assert_array_equal(resumed.x, whole.x, err_msg="final design")
     for got, expected, quantity in zip(resumed.history, whole.history,
                                        ("psi", "volume", "max change", "constraints", "names"), strict=True):
@@ -459,6 +473,98 @@ def test_crash_while_writing_keeps_the_previous_checkpoint(tmp_path, monkeypatch
     assert kept.iteration == 3, "the previous checkpoint must survive a failed write"
     np.testing.assert_array_equal(kept.x, old.x)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.npz"], "no temporary file left behind"
+
+
+def test_log_and_checkpoint_keep_every_constraint(tmp_path):
+    result = run(tmp_path, "mma", 6, extra=True, every=2)
+    rows = (tmp_path / "log.csv").read_text().splitlines()
+    assert rows[0] == "iteration,psi,volume,max_change,g_volume,g_mass,g_spread" and len(rows) == 7
+    log = np.loadtxt(tmp_path / "log.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(log[:, 4:], result.history.constraint_values, err_msg="constraint columns")
+    checkpoint = fj.load_checkpoint(tmp_path / "checkpoint.npz")
+    assert checkpoint.history.names == ("volume", "mass", "spread")
+    np.testing.assert_array_equal(checkpoint.history.constraint_values, result.history.constraint_values)
+    with pytest.raises(fj.CheckpointError, match="constraints"):  # a resume with other constraints
+        run(tmp_path, "mma", 8, resume=True)
+    ax = fj.plot_history(result.history)
+    assert len(ax.figure.axes) == 3, "psi, max change, and the constraint panel"
+    assert [line.get_label() for line in ax.figure.axes[1].get_lines()][:3] == ["g_volume", "g_mass", "g_spread"]
+
+
+def test_mma_meets_several_constraints_and_lowers_psi():
+    result = run(None, "mma", 60, extra=True)
+    assert result.feasible, result.descriptions
+    g = result.constraints
+    assert np.all(g <= 1e-6), f"every constraint holds at the end: {result.descriptions}"
+    assert result.history.value[-1] < result.history.value[0]
+    assert all("holds" in line for line in result.descriptions)
+
+
+def test_contradicting_constraints_end_reported_infeasible():
+    # volume <= 0.3 and mass >= the mass of the uniform 0.6 design: the mass law is linear above
+    # x = 0.1, so the mass needs a volume fraction near 0.6 (up to the interface columns). Each bound
+    # alone can be met (neither is refused at construction); together they cannot.
+    design = small_design()
+    n = design.n_design
+    _, value_and_grad = surrogate(n)
+    mass_06 = float(fj.MassConstraint(design, 1.0).mass(design.initial_design(0.6)))
+    constraints = (fj.VolumeConstraint(0.3), fj.MassConstraint(design, mass_06, lower=True))
+    with pytest.warns(fj.ConstraintViolationWarning, match=r"mass: mass .* VIOLATED") as record:
+        result = fj.optimize(value_and_grad, jnp.full(n, 0.5), fj.MMA(X_MIN, move=0.2), constraints,
+                             iterations=30, progress=False)
+    assert "admit no design together" in str(record[0].message)
+    assert not result.feasible
+    assert np.all(np.isfinite(result.history.value)) and np.all(np.isfinite(result.history.constraint_values))
+    assert np.all(np.isfinite(result.x))
+    # MMA's artificial variables y_i absorb what cannot be met (penalty c y + d y^2 / 2): here the
+    # volume is held and the mass bound left 37 % short.
+    assert result.constraints.max() > 0.05
+
+
+def test_frequency_bound_out_of_reach_ends_reported_infeasible():
+    case = fj.cases.slider_crank(12, 2, 2, 0.2, fe_path="dense")
+    with pytest.warns(UserWarning, match="above f_1"):
+        frequency = fj.FrequencyConstraint(case, 3.0 * fj.FrequencyConstraint(case, 1.0).solid)
+    mass = fj.MassConstraint(case.design, 10.0)
+    with pytest.warns(fj.ConstraintViolationWarning, match="frequency: f_1 .* VIOLATED"):
+        result = fj.optimize(lambda x: mass.value_and_grad(x), case.initial_design(0.5), fj.MMA(case.material.x_min),
+                             (fj.VolumeConstraint(0.5), frequency), iterations=15, progress=False)
+    assert not result.feasible and result.constraints[1] > 0.3
+    assert np.all(np.isfinite(result.history.constraint_values))
+
+
+def test_a_nan_stops_the_run_with_the_step(tmp_path):
+    n = small_design().n_design
+    _, value_and_grad = surrogate(n)
+
+    def fun(x):  # NaN once the design has moved away from the start (from step 2 on)
+        value, grad = value_and_grad(x)
+        return jnp.where(jnp.max(jnp.abs(x - 0.4)) > 0.15, jnp.nan, value), grad
+
+    with pytest.raises(FloatingPointError, match=r"Step \d+ of the optimisation produced psi = nan"):
+        fj.optimize(fun, jnp.full(n, 0.4), fj.MMA(X_MIN, move=0.1), fj.VolumeConstraint(VOLUME), iterations=20,
+                    directory=tmp_path, checkpoint_every=1, progress=False)
+    saved = fj.load_checkpoint(tmp_path / "checkpoint.npz")
+    assert saved.iteration >= 1 and np.all(np.isfinite(saved.history.value)), "the checkpoint holds the good steps"
+
+
+def test_stop_change_ends_early_and_a_resume_stops_there_too(tmp_path):
+    whole = run(tmp_path / "whole", "mma", 200, stop_change=0.02)
+    steps = whole.history.steps
+    assert steps < 200 and whole.history.change[-1] <= 0.02 and np.all(whole.history.change[:-1] > 0.02)
+    assert fj.load_checkpoint(tmp_path / "whole" / "checkpoint.npz").iteration == steps
+    again = run(tmp_path / "whole", "mma", 200, resume=True, stop_change=0.02)
+    assert again.history.steps == steps, "a resumed run that already met the rule makes no step"
+
+
+def test_optax_optimizers_refuse_other_constraints():
+    design = small_design()
+    _, value_and_grad = surrogate(design.n_design)
+    volume = fj.VolumeConstraint(VOLUME)
+    with pytest.raises(ValueError, match="use fj.MMA"):
+        fj.make_step(value_and_grad, optax.adam(0.1), (volume, fj.MassConstraint(design, 1.0)))
+    with pytest.raises(ValueError, match="Unknown optimizer"):
+        fj.make_step(value_and_grad, "adam", volume)
 
 
 # --- command line -------------------------------------------------------------------------------
