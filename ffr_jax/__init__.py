@@ -10,6 +10,9 @@ from ._api import objective as objective, simulate_case as simulate_case, value_
 from ._body_data import BodyData as BodyData, flexible_body_data as flexible_body_data, rigid_body_data as rigid_body_data
 from ._case import FlexibleRodCase as FlexibleRodCase
 from ._gradient_plot import plot_gradient as plot_gradient, row_signs as row_signs
+from ._io._animation import Animation as Animation, animate as animate, body_motion as body_motion
+from ._io._outline import density_outline as density_outline, write_dxf as write_dxf, write_svg as write_svg
+from ._io._vtu import write_vtu as write_vtu
 from ._fe import RodMesh as RodMesh, mass_matrix as mass_matrix, stiffness_matrix as stiffness_matrix
 from ._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
 from ._modes import ModalBasis as ModalBasis, hinged_modes as hinged_modes, retained_eigenpairs as retained_eigenpairs

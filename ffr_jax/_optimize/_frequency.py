@@ -3,6 +3,7 @@
 import warnings
 
 import equinox as eqx
+import jax
 
 from .._case import FlexibleRodCase
 from .._fe import mass_matrix, stiffness_matrix
@@ -75,7 +76,7 @@ class FrequencyConstraint(AbstractDesignConstraint):
         self.projection = projection
         self.name = name
         design = case.design
-        self.solid = float(case.frequencies(design.initial_design(1.0))[mode])
+        self.solid = float(jax.jit(case.frequencies)(design.initial_design(1.0))[mode])
         self.upper_bound = self._upper_bound() if mode == 0 else float("inf")
         if self.minimum >= self.upper_bound:
             raise ValueError(
@@ -97,10 +98,15 @@ class FrequencyConstraint(AbstractDesignConstraint):
         if mesh.n_dof > _BOUND_CHECK_MAX_DOF:
             return float("inf")
         design, material = self.case.design, self.case.material
-        youngs = material.youngs(design.element_densities(design.initial_design(1.0)))
-        densities = material.densities(design.element_densities(design.initial_design(material.x_min)))
-        basis = hinged_modes(stiffness_matrix(mesh, youngs), mass_matrix(mesh, densities), self.case.fixed_dofs, 1)
-        return float(basis.frequencies[0])
+
+        @jax.jit
+        def bound(solid, lightest):
+            youngs = material.youngs(design.element_densities(solid))
+            densities = material.densities(design.element_densities(lightest))
+            basis = hinged_modes(stiffness_matrix(mesh, youngs), mass_matrix(mesh, densities), self.case.fixed_dofs, 1)
+            return basis.frequencies[0]
+
+        return float(bound(design.initial_design(1.0), design.initial_design(material.x_min)))
 
     def frequency(self, x_phys: Design):
         """`f_k` in Hz of the physical densities `x_phys` `(n_design,)`."""

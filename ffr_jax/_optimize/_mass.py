@@ -1,6 +1,7 @@
 """A bound on the total mass of the designed body (SIMP density law, paper eq. 47)."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .._simp import RodDesign
@@ -92,5 +93,6 @@ class MassConstraint(AbstractDesignConstraint):
     def range(self) -> tuple[float, float]:
         """The masses of the lightest and of the solid design, in kg (every reachable mass lies between)."""
         d = self.design
-        return float(self.mass(d.initial_design(d.material.x_min))), float(self.mass(d.initial_design(1.0)))
+        mass = jax.jit(self.mass)
+        return float(mass(d.initial_design(d.material.x_min))), float(mass(d.initial_design(1.0)))
 
