@@ -111,11 +111,13 @@ def test_frequency_bound_of_every_design(case):
     sandwich = np.ones((4, 22))
     sandwich[1:3] = big.material.x_min
     sandwich[:, ::6] = 1.0
-    assert float(big.frequencies(jnp.asarray(sandwich.ravel()))[0]) > 1.05 * fj.FrequencyConstraint(big, 1.0).solid, \
+    big_f1 = jax.jit(lambda x: big.frequencies(x)[0])
+    assert float(big_f1(jnp.asarray(sandwich.ravel()))) > 1.05 * float(big_f1(big.initial_design(1.0))), \
         "a sandwich with webs beats the solid rod's f_1"
-    frequencies = [float(case.frequencies(random_design(case, s, 0.01, 1.0))[0]) for s in range(5)]
-    frequencies += [float(case.frequencies(d.initial_design(v))[0]) for v in (0.01, 0.5, 1.0)]
-    frequencies.append(float(case.frequencies(jnp.asarray(grid.ravel()))[0]))
+    f1 = jax.jit(lambda x: case.frequencies(x)[0])
+    frequencies = [float(f1(random_design(case, s, 0.01, 1.0))) for s in range(5)]
+    frequencies += [float(f1(d.initial_design(v))) for v in (0.01, 0.5, 1.0)]
+    frequencies.append(float(f1(jnp.asarray(grid.ravel()))))
     assert max(frequencies) < bound, f"f_1 of designs {frequencies} above the bound {bound}"
     assert solid == pytest.approx(max(frequencies[-2:]), rel=1e-12)
     with pytest.raises(ValueError, match="No design of this body reaches"):

@@ -1,12 +1,26 @@
 """The `ffr-jax animate` and `ffr-jax export` subcommands: an optimised design made visible."""
 
 import argparse
+import functools
 import json
 from pathlib import Path
 
 import numpy as np
 
 _CASE_DEFAULTS = {"nx": 100, "ny": 6, "modes": 6, "t1": 3.0}
+
+
+@functools.cache
+def slider_crank_case(nx: int, ny: int, modes: int, t1: float):
+    """The slider–crank of the commands, built once per process for each setting.
+
+    A case is an immutable pytree; sharing one object between commands run in one process (tests,
+    notebooks) lets the compiled programs that take it (the animation's motion, the modal analysis)
+    be reused instead of traced again.
+    """
+    import ffr_jax as fj
+
+    return fj.cases.slider_crank(nx=nx, ny=ny, n_modes=modes, t1=t1)
 
 
 def _add_design_arguments(p: argparse.ArgumentParser) -> None:
@@ -23,8 +37,6 @@ def _add_design_arguments(p: argparse.ArgumentParser) -> None:
 
 def _case_and_design(args: argparse.Namespace):
     """The case (settings: defaults < the design's run < options) and the physical densities."""
-    import ffr_jax as fj
-
     settings = dict(_CASE_DEFAULTS)
     x_phys = None
     if args.design is not None:
@@ -42,7 +54,7 @@ def _case_and_design(args: argparse.Namespace):
                 config = json.loads(str(stored["config"]))
                 settings.update({key: config[key] for key in settings if key in config})
     settings.update({key: getattr(args, key) for key in settings if getattr(args, key) is not None})
-    case = fj.cases.slider_crank(nx=settings["nx"], ny=settings["ny"], n_modes=settings["modes"], t1=settings["t1"])
+    case = slider_crank_case(int(settings["nx"]), int(settings["ny"]), int(settings["modes"]), float(settings["t1"]))
     if x_phys is None:
         x_phys = np.asarray(case.initial_design(0.5 if args.value is None else args.value))
     elif x_phys.shape != (case.n_design,):

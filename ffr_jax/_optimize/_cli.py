@@ -127,7 +127,9 @@ def _run(args: argparse.Namespace) -> int:
     config = {key: value for key, value in s.items() if key in stored or value != _DEFAULTS.get(key)}
     if s["beta"] < 0.0:
         raise ValueError(f"--projection-beta must be >= 0 (0 = no projection), got {s['beta']}.")
-    case = fj.cases.slider_crank(nx=s["nx"], ny=s["ny"], n_modes=s["modes"], t1=s["t1"])
+    from .._io._cli import slider_crank_case
+
+    case = slider_crank_case(int(s["nx"]), int(s["ny"]), int(s["modes"]), float(s["t1"]))
     filt = fj.DensityFilter(case.design, s["filter_radius"])
     projection, beta = None, None
     if s["beta"] > 0.0:

@@ -76,7 +76,7 @@ class FrequencyConstraint(AbstractDesignConstraint):
         self.projection = projection
         self.name = name
         design = case.design
-        self.solid = float(jax.jit(case.frequencies)(design.initial_design(1.0))[mode])
+        self.solid = float(jax.jit(lambda x: case.frequencies(x)[mode])(design.initial_design(1.0)))
         self.upper_bound = self._upper_bound() if mode == 0 else float("inf")
         if self.minimum >= self.upper_bound:
             raise ValueError(

@@ -93,6 +93,6 @@ class MassConstraint(AbstractDesignConstraint):
     def range(self) -> tuple[float, float]:
         """The masses of the lightest and of the solid design, in kg (every reachable mass lies between)."""
         d = self.design
-        mass = jax.jit(self.mass)
+        mass = jax.jit(lambda x: self.mass(x))
         return float(mass(d.initial_design(d.material.x_min))), float(mass(d.initial_design(1.0)))
 
