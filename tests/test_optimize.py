@@ -336,7 +336,7 @@ def test_projected_volume_holds_after_every_update_through_a_continuation(name):
 
 # --- driver, log and checkpoints ----------------------------------------------------------------
 def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLUME, every=4, projected=False,
-        extra=False, **kwargs):
+        extra=False, progress=False, **kwargs):
     """A run on the surrogate; `extra`: MMA with a mass bound and a function constraint beside the volume."""
     design = small_design()
     filt = fj.DensityFilter(design, 1.5)
@@ -351,7 +351,7 @@ def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLU
     return fj.optimize(
         fj.filtered_objective(value_and_grad, filt, projection), jnp.full(filt.weights.shape[0], volume),
         optimizers(constraint)[name], constraints, iterations=iterations, directory=directory, resume=resume,
-        checkpoint_every=every, config={"optimizer": name, "volume": volume}, progress=False, callback=callback,
+        checkpoint_every=every, config={"optimizer": name, "volume": volume}, progress=progress, callback=callback,
         beta=beta, **kwargs,
     )
 
@@ -565,6 +565,16 @@ def test_optax_optimizers_refuse_other_constraints():
         fj.make_step(value_and_grad, optax.adam(0.1), (volume, fj.MassConstraint(design, 1.0)))
     with pytest.raises(ValueError, match="Unknown optimizer"):
         fj.make_step(value_and_grad, "adam", volume)
+
+
+def test_progress_is_plain_lines_when_not_a_terminal(capsys):
+    # Under pytest standard error is not a terminal: no tqdm bar with carriage returns, a line per
+    # tenth of the run with the last step's numbers.
+    run(None, "mma", 20, extra=True, progress=True)
+    err = capsys.readouterr().err
+    lines = err.splitlines()
+    assert "\r" not in err and len(lines) == 10, err
+    assert lines[-1].startswith("100%") and "20/20" in lines[-1] and "psi" in lines[-1] and "max g" in lines[-1]
 
 
 # --- command line -------------------------------------------------------------------------------
