@@ -139,6 +139,8 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
     try:
         for k in range(history.steps, iterations):
             if stop_change is not None and history.steps and history.change[-1] <= stop_change:
+                if log is not None and history.steps % checkpoint_every:  # keep the last step
+                    _save(directory, history.steps, x, opt_state, history, config)
                 break
             x_new, opt_state, info = step(x, opt_state, beta_of(k))
             value, volume, change = float(info.value), float(info.volume), float(info.change)
@@ -154,10 +156,6 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
             if callback is not None:
                 callback(k, x, info)
             bar.update(k + 1, _postfix(value, volume, change, g))
-        else:
-            k = None
-        if k is not None and log is not None:  # stopped early: the checkpoint holds the last step
-            _save(directory, history.steps, x, opt_state, history, config)
     finally:
         if log is not None:
             log.close()
