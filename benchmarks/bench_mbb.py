@@ -80,7 +80,7 @@ def main():
     ]
     for r in rows:
         published = PUBLISHED.get(r["radius"])
-        versus = f"{100 * (r['compliance'] / published - 1):+.3f} %" if published else "–"
+        versus = f"{100 * (r['compliance'] / published - 1):+.4f} %" if published else "–"
         lines.append(f"| {r['radius']:g} | {r['optimizer'].upper()} | {r['iterations']} | {r['compliance']:.4f} | "
                      f"{versus} | {r['volume']:.6f} | {100 * r['grey']:.1f} % | {r['first_run_s']:.1f} | "
                      f"{r['median_later_s']:.1f} |")
