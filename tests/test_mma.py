@@ -208,5 +208,6 @@ def test_mma_reaches_the_published_mbb_compliance():
                                atol=1e-12, err_msg="g_volume(x_k) is the volume of x_k, logged a step later")
 
 
+@pytest.mark.slow  # 150 OC steps; benchmarks/bench_mbb.py runs it and reports the same number
 def test_oc_retraces_top88_on_the_mbb_beam():
     check_mbb("oc", OC_MBB_TOL)

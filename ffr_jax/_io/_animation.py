@@ -123,7 +123,7 @@ def animate(case: FlexibleRodCase, x_phys, path, *, frames: int = 60, fps: float
 
     figure = Figure(figsize=(8, 8 * max(0.3, (high[1] - low[1]) / (high[0] - low[0])) + 0.8), dpi=dpi)
     FigureCanvasAgg(figure)
-    ax = figure.add_axes((0.1, 0.1, 0.76, 0.78))
+    ax = figure.add_axes((0.1, 0.1, 0.76, 0.74))
     colour_axes = figure.add_axes((0.89, 0.15, 0.025, 0.7))
     cells = PolyCollection(positions[0][quads], array=density, cmap="gray_r", clim=(0.0, 1.0), edgecolors="face",
                            linewidths=0.3)
@@ -150,7 +150,7 @@ def animate(case: FlexibleRodCase, x_phys, path, *, frames: int = 60, fps: float
             cells.set_verts(positions[i][quads])
             for artist, (points, _) in zip(artists, decorations, strict=True):
                 artist.set_data(points[i, :, 0], points[i, :, 1])
-            caption.set_text(f"{head}: t = {t:.3f} s, elastic displacement x {amplification:g} "
+            caption.set_text(f"{head}\nt = {t:.3f} s, elastic displacement x {amplification:g} "
                              f"(largest {1e3 * largest:.3g} mm)")
             if writer is not None:
                 writer.grab_frame()
@@ -189,8 +189,11 @@ def _decorations(case: FlexibleRodCase, ts, nodes):
             items.append((np.stack([centre, pins], axis=1), ("C3o-", 3.0, 5.0)))
         elif isinstance(joint, PointOnLine):
             point, direction = np.asarray(joint.point), np.asarray(joint.direction)
-            span = 1.6 * case.mesh.length
-            guide = np.stack([point - 0.2 * span * direction, point + span * direction])
+            # The guide spans where the joint point travels, and a tenth of the body beyond.
+            along = (nodes[:, case.marker_nodes[joint.marker]] - point) @ direction if joint.body == case.body \
+                else np.zeros(1)
+            reach = 0.1 * case.mesh.length
+            guide = np.stack([point + (along.min() - reach) * direction, point + (along.max() + reach) * direction])
             items.append((np.broadcast_to(guide, (len(ts), 2, 2)), ("k--", 0.8, 0.0)))
             if joint.body == case.body:
                 items.append((nodes[:, [case.marker_nodes[joint.marker]]], ("C0s", 0.0, 8.0)))

@@ -1,6 +1,7 @@
 """The `ffr-jax optimize` subcommand: volume-constrained minimisation of a case's objective."""
 
 import argparse
+import functools
 import json
 from pathlib import Path
 
@@ -117,6 +118,25 @@ def _settings(args: argparse.Namespace) -> tuple[Path, dict, set]:
     return directory, settings, stored
 
 
+@functools.cache
+def _problem(nx: int, ny: int, modes: int, t1: float, filter_radius: float, eta: float | None, method: str,
+             rtol: float, atol: float):
+    """`(case, filter, projection, objective)` of a setting, built once per process.
+
+    Runs in one process with the same case and objective settings (tests, notebooks, a resumed run
+    after a finished one) share the objective function, and so its compiled program (see
+    [`make_step`][]), whatever optimizer or constraints they use.
+    """
+    import ffr_jax as fj
+    from .._io._cli import slider_crank_case
+
+    case = slider_crank_case(nx, ny, modes, t1)
+    filt = fj.DensityFilter(case.design, filter_radius)
+    projection = None if eta is None else fj.HeavisideProjection(eta, x_min=case.material.x_min)
+    fun = fj.make_objective(case, method, filter=filt, projection=projection, rtol=rtol, atol=atol)
+    return case, filt, projection, fun
+
+
 def _run(args: argparse.Namespace) -> int:
     import optax
 
@@ -127,13 +147,11 @@ def _run(args: argparse.Namespace) -> int:
     config = {key: value for key, value in s.items() if key in stored or value != _DEFAULTS.get(key)}
     if s["beta"] < 0.0:
         raise ValueError(f"--projection-beta must be >= 0 (0 = no projection), got {s['beta']}.")
-    from .._io._cli import slider_crank_case
-
-    case = slider_crank_case(int(s["nx"]), int(s["ny"]), int(s["modes"]), float(s["t1"]))
-    filt = fj.DensityFilter(case.design, s["filter_radius"])
-    projection, beta = None, None
+    case, filt, projection, fun = _problem(int(s["nx"]), int(s["ny"]), int(s["modes"]), float(s["t1"]),
+                                           float(s["filter_radius"]), float(s["eta"]) if s["beta"] > 0.0 else None,
+                                           s["method"], float(s["rtol"]), float(s["atol"]))
+    beta = None
     if s["beta"] > 0.0:
-        projection = fj.HeavisideProjection(s["eta"], x_min=case.material.x_min)
         beta = fj.beta_continuation(s["beta"], max(s["beta_max"], s["beta"]), every=s["beta_every"])
     constraint = fj.VolumeConstraint(s["volume"], x_min=case.material.x_min, filter=filt, projection=projection)
     constraints = [constraint]
@@ -150,7 +168,6 @@ def _run(args: argparse.Namespace) -> int:
         optimizer = fj.optimality_criteria(constraint, move=s["move"])
     else:
         optimizer = fj.MMA(case.material.x_min, 1.0, move=s["mma_move"])
-    fun = fj.make_objective(case, s["method"], filter=filt, projection=projection, rtol=s["rtol"], atol=s["atol"])
     projected = "" if beta is None else f", Heaviside projection beta {s['beta']} -> {s['beta_max']} (x2 every {s['beta_every']})"
     bounds = "".join(f", {c.name} {'>=' if isinstance(c, fj.FrequencyConstraint) else '<='} "
                      f"{c.minimum if isinstance(c, fj.FrequencyConstraint) else c.bound:g}" for c in constraints[1:])

@@ -3,7 +3,6 @@
 import warnings
 
 import equinox as eqx
-import jax
 
 from .._case import FlexibleRodCase
 from .._fe import mass_matrix, stiffness_matrix
@@ -75,9 +74,9 @@ class FrequencyConstraint(AbstractDesignConstraint):
         self.filter = filter
         self.projection = projection
         self.name = name
-        design = case.design
-        self.solid = float(jax.jit(lambda x: case.frequencies(x)[mode])(design.initial_design(1.0)))
-        self.upper_bound = self._upper_bound() if mode == 0 else float("inf")
+        self.solid = float(_frequencies(case, case.design.initial_design(1.0))[mode])
+        self.upper_bound = float(_rayleigh_bound(case)) if mode == 0 and case.mesh.n_dof <= _BOUND_CHECK_MAX_DOF \
+            else float("inf")
         if self.minimum >= self.upper_bound:
             raise ValueError(
                 f"No design of this body reaches f_1 >= {self.minimum:g} Hz: every design has f_1 <= "
@@ -90,23 +89,8 @@ class FrequencyConstraint(AbstractDesignConstraint):
                 "Designs that take mass away where it moves but carries little stiffness can exceed the solid "
                 "body's frequency, but perhaps not by this much: the run may end infeasible (check "
                 "OptimizeResult.feasible).",
-                stacklevel=2,
+                stacklevel=4,  # past equinox's module construction, to the caller
             )
-
-    def _upper_bound(self) -> float:
-        mesh = self.case.mesh
-        if mesh.n_dof > _BOUND_CHECK_MAX_DOF:
-            return float("inf")
-        design, material = self.case.design, self.case.material
-
-        @jax.jit
-        def bound(solid, lightest):
-            youngs = material.youngs(design.element_densities(solid))
-            densities = material.densities(design.element_densities(lightest))
-            basis = hinged_modes(stiffness_matrix(mesh, youngs), mass_matrix(mesh, densities), self.case.fixed_dofs, 1)
-            return basis.frequencies[0]
-
-        return float(bound(design.initial_design(1.0), design.initial_design(material.x_min)))
 
     def frequency(self, x_phys: Design):
         """`f_k` in Hz of the physical densities `x_phys` `(n_design,)`."""
@@ -120,3 +104,16 @@ class FrequencyConstraint(AbstractDesignConstraint):
         f = self.minimum * (1.0 - g)
         return f"f_{self.mode + 1} {f:.6g} Hz (bound >= {self.minimum:g} Hz): {status(g)}"
 
+
+@eqx.filter_jit
+def _frequencies(case: FlexibleRodCase, x):
+    return case.frequencies(x)
+
+
+@eqx.filter_jit
+def _rayleigh_bound(case: FlexibleRodCase):
+    """`f_1` of the pair `(K(1), M(x_min))`: above `f_1` of every design (see [`FrequencyConstraint`][])."""
+    design, material, mesh = case.design, case.material, case.mesh
+    youngs = material.youngs(design.element_densities(design.initial_design(1.0)))
+    densities = material.densities(design.element_densities(design.initial_design(material.x_min)))
+    return hinged_modes(stiffness_matrix(mesh, youngs), mass_matrix(mesh, densities), case.fixed_dofs, 1).frequencies[0]

@@ -1,7 +1,6 @@
 """A bound on the total mass of the designed body (SIMP density law, paper eq. 47)."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from .._simp import RodDesign
@@ -75,9 +74,7 @@ class MassConstraint(AbstractDesignConstraint):
 
     def mass(self, x_phys: Design) -> Scalar:
         """`m = sum_e rho_e V_e` of the physical densities `x_phys` `(n_design,)`, in kg."""
-        mesh = self.design.mesh
-        densities = self.design.material.densities(self.design.element_densities(x_phys))
-        return jnp.sum(densities) * (mesh.dx * mesh.dy * mesh.thickness)
+        return body_mass(self.design, x_phys)
 
     def value_and_grad(self, x: Design, beta=None):
         m, grad = pullback(self.mass, x, self.filter, self.projection, beta)
@@ -93,6 +90,12 @@ class MassConstraint(AbstractDesignConstraint):
     def range(self) -> tuple[float, float]:
         """The masses of the lightest and of the solid design, in kg (every reachable mass lies between)."""
         d = self.design
-        mass = jax.jit(lambda x: self.mass(x))
-        return float(mass(d.initial_design(d.material.x_min))), float(mass(d.initial_design(1.0)))
+        mass = eqx.filter_jit(body_mass)
+        return float(mass(d, d.initial_design(d.material.x_min))), float(mass(d, d.initial_design(1.0)))
 
+
+def body_mass(design: RodDesign, x_phys: Design) -> Scalar:
+    """`m = sum_e rho_e V_e` of a body with physical densities `x_phys` `(n_design,)` (SIMP law, paper eq. 47)."""
+    mesh = design.mesh
+    densities = design.material.densities(design.element_densities(x_phys))
+    return jnp.sum(densities) * (mesh.dx * mesh.dy * mesh.thickness)

@@ -1,5 +1,6 @@
 """One optimisation step: evaluate the objective and the constraints, then update the design."""
 
+import functools
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
@@ -81,6 +82,45 @@ def evaluate_constraints(constraints: Sequence[AbstractDesignConstraint], x, bet
     return jnp.stack([jnp.asarray(v, dtype=x.dtype) for v in values]), jnp.stack(grads)
 
 
+def _call(fun, x, beta):
+    return fun(x) if beta is None else fun(x, beta)
+
+
+@functools.partial(jax.jit, static_argnames="fun")
+def _objective(x, beta, *, fun):
+    return _call(fun, x, beta)
+
+
+class _Identity:
+    """The update rule as a static jit argument, compared by the identity of its parts.
+
+    Optimizers and constraints are pytrees with arrays (not hashable by value); steps made from the
+    same objects (a resumed run, a notebook cell run again) reuse one compiled update. The cache of
+    the jit holds these objects, so an `id` in a stored key cannot be taken by a new object.
+    """
+
+    def __init__(self, optimizer, constraints, volume):
+        self.value = (optimizer, constraints, volume)
+        parts = (optimizer.transformation, optimizer.volume) if isinstance(optimizer, ProjectedOptax) else (optimizer,)
+        self.key = (type(optimizer), *map(id, parts), *map(id, constraints), id(volume))
+
+    def __hash__(self):
+        return hash(self.key)
+
+    def __eq__(self, other):
+        return isinstance(other, _Identity) and self.key == other.key
+
+
+@functools.partial(jax.jit, static_argnames="rule")
+def _advance(x, state, value, grad, beta, *, rule):
+    optimizer, constraints, volume = rule.value
+    g, dg = evaluate_constraints(constraints, x, beta)
+    x_new, state = optimizer.update(x, state, value, grad, g, dg, beta)
+    fraction = jnp.full((), jnp.nan, x.dtype) if volume is None else volume.fraction(x_new, beta)
+    info = StepInfo(value=value, volume=fraction, change=jnp.max(jnp.abs(x_new - x)), constraints=g)
+    return x_new, state, info
+
+
 def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
     """A compiled step `step(x, state, beta=None) -> (x_new, state, info)`.
 
@@ -90,10 +130,11 @@ def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
     projection onto the volume constraint ([`VolumeConstraint.project`][]), so every iterate
     satisfies `x_min <= x <= 1` and `mean(c x) = V`; with [`MMA`][] the constraints `g_i` and
     their gradients are evaluated at `x` too and MMA's subproblem gives `x_new`. The step is two
-    jit-compiled programs, `step.objective` (`fun`) and `step.advance` (constraints and update),
-    each compiled on its first call and reused for every later one as long as `x` and `state`
-    keep their shapes and dtypes (which the loop does); `beta` is a traced argument, so a
-    continuation that raises it does not recompile.
+    jit-compiled programs, `step.objective` (`fun`; one program per `fun` object, shared by all
+    steps made from it) and `step.advance` (constraints and update; one program per optimizer and
+    constraint objects), each compiled on its first call and reused for every later one as long as
+    `x` and `state` keep their shapes and dtypes (which the loop does); `beta` is a traced argument,
+    so a continuation that raises it does not recompile.
 
     **Arguments:**
     - `fun`: `x -> (value, grad)`, e.g. [`make_objective`][] or `jax.value_and_grad(f)`; with a
@@ -122,17 +163,16 @@ def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
     volume = volume_of(optimizer, constraints)
 
     # Two programs: the objective alone, and constraints + update. The objective (a simulation and
-    # its gradient) dominates compile time; compiled alone its program depends only on `fun`, so
-    # runs with other optimizers or constraints find it in JAX's persistent compilation cache.
-    objective = jax.jit(lambda x, beta: fun(x) if beta is None else fun(x, beta))
+    # its gradient) dominates compile time; compiled alone, and keyed on `fun` itself, it is traced
+    # once per `fun` object, whatever optimizer or constraints later steps use it with. The update is
+    # keyed on the optimizer and constraint objects.
+    try:
+        hash(fun)
+        objective = functools.partial(_objective, fun=fun)
+    except TypeError:
+        objective = jax.jit(lambda x, beta: _call(fun, x, beta))
 
-    @jax.jit
-    def advance(x, state, value, grad, beta):
-        g, dg = evaluate_constraints(constraints, x, beta)
-        x_new, state = optimizer.update(x, state, value, grad, g, dg, beta)
-        fraction = jnp.full((), jnp.nan, x.dtype) if volume is None else volume.fraction(x_new, beta)
-        info = StepInfo(value=value, volume=fraction, change=jnp.max(jnp.abs(x_new - x)), constraints=g)
-        return x_new, state, info
+    advance = functools.partial(_advance, rule=_Identity(optimizer, constraints, volume))
 
     def step(x, state, beta=None):
         value, grad = objective(x, beta)
