@@ -122,5 +122,6 @@ def _export(args: argparse.Namespace) -> int:
         loops = len(density_outline(case, x_phys, args.level))
         for path, write in ((args.svg, write_svg), (args.dxf, write_dxf)):
             if path is not None:
-                print(f"wrote {write(path, case, x_phys, level=args.level)} ({loops} closed contour(s) at {args.level})")
+                written = write(path, case, x_phys, level=args.level)
+                print(f"wrote {written} ({loops} closed contour(s) at {args.level})")
     return 0

@@ -88,7 +88,8 @@ def add_optimize_parser(sub) -> None:
     p.add_argument("--rtol", type=float, help="relative tolerance of the solves (default 1e-8)")
     p.add_argument("--atol", type=float,
                    help="absolute tolerance of the solves (default 1e-12; short runs have tiny elastic coordinates)")
-    p.add_argument("--no-progress", action="store_true", help="no progress line")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress report (a tqdm bar on a terminal, a line per tenth of the run otherwise)")
     p.set_defaults(func=_run)
 
 

@@ -114,8 +114,8 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
         checkpoint = load_checkpoint(directory / CHECKPOINT)
         _check_config(checkpoint.config, config)
         if checkpoint.history.names != names:
-            raise CheckpointError(f"Cannot resume: the run was made with the constraints {list(checkpoint.history.names)}, "
-                                  f"now {list(names)}.")
+            raise CheckpointError(f"Cannot resume: the run was made with the constraints "
+                                  f"{list(checkpoint.history.names)}, now {list(names)}.")
         if checkpoint.x.shape != x.shape:
             raise CheckpointError(f"The checkpoint's design has shape {checkpoint.x.shape}, this run's {x.shape}.")
         x = jnp.asarray(checkpoint.x)

@@ -85,7 +85,8 @@ class FrequencyConstraint(AbstractDesignConstraint):
             )
         if self.minimum > self.solid:
             warnings.warn(
-                f"The frequency bound {self.minimum:g} Hz lies above f_{mode + 1} = {self.solid:.6g} Hz of the solid body. "
+                f"The frequency bound {self.minimum:g} Hz lies above f_{mode + 1} = {self.solid:.6g} Hz of the solid "
+                "body. "
                 "Designs that take mass away where it moves but carries little stiffness can exceed the solid "
                 "body's frequency, but perhaps not by this much: the run may end infeasible (check "
                 "OptimizeResult.feasible).",
