@@ -159,7 +159,8 @@ def _section(args, config: dict, summary: dict, n_sessions: int) -> str:
         f"Command: `{command}` (drives `ffr-jax optimize slider-crank`; re-running it resumes the stored run "
         "and only re-evaluates when it is complete).",
         "",
-        f"Reference rod (100 x 6, 588 densities, 6 modes, t1 = 3 s), volume fraction {config['volume']}. "
+        f"Reference rod (100 x 6, 588 densities, 6 modes, t1 = 3 s), volume fraction "
+        f"{'<= ' if config['optimizer'] == 'mma' else ''}{config['volume']}. "
         f"Gradients in the loop by `{config['method']}` at rtol {config['rtol']:g} / atol {config['atol']:g}; "
         "the final psi of the optimised and of the uniform design re-evaluated at rtol 1e-10 / atol 1e-12.",
         "",
@@ -183,8 +184,26 @@ def _section(args, config: dict, summary: dict, n_sessions: int) -> str:
         "2-core machine while other sessions ran, so its wall time is above the cost on a quiet machine. "
         f"Design: `{args.out.name}/design.png`, convergence: `{args.out.name}/convergence.png`, numbers: "
         f"`{args.out.name}/summary.json`, per-step log: `{args.out.name}/log.csv`.",
+        *_reference_table(root / "benchmarks" / "results"),
         *_reduced_table(root / "benchmarks" / "results" / "optimize_reduced"),
     ])
+
+
+def _reference_table(results: pathlib.Path) -> list[str]:
+    """The runs on the reference rod side by side (from their summary.json)."""
+    summaries = sorted(results.glob("optimize_reference*/summary.json"))
+    if len(summaries) < 2:
+        return []
+    rows = ["", "The reference runs side by side (each from its own directory; wall times under the loads "
+            "stated in their sections):", "",
+            "| run | optimizer | iterations | volume | psi (rtol 1e-10) | intermediate 0.1-0.9 | wall time | per step |",
+            "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for path in summaries:
+        s = json.loads(path.read_text())
+        rows.append(f"| {path.parent.name} | {_step_label(s['settings'])} | {s['iterations']} | {s['volume']:.3f} | "
+                    f"{s['psi_optimised']:.4e} | {100 * s['intermediate_0.1_0.9']:.1f} % | {s['wall_time_s']:.0f} s | "
+                    f"{s['wall_time_s'] / max(s['iterations'], 1):.1f} s |")
+    return rows
 
 
 def _reduced_table(directory: pathlib.Path) -> list[str]:

@@ -189,7 +189,8 @@ def _run(args: argparse.Namespace) -> int:
              max_change=h.change, beta=np.array(np.nan if beta_last is None else beta_last),
              config=np.array(json.dumps(s, sort_keys=True)), constraint_names=np.array(json.dumps(list(h.names))),
              constraint_history=h.constraint_values, constraints=np.asarray(result.constraints))
-    ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, V = {s['volume']}, {h.steps} steps")
+    bound = f"V = {s['volume']}" if s["optimizer"] != "mma" else f"V = {x_phys.mean():.3f} (<= {s['volume']})"
+    ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, {s['optimizer']}, {bound}, {h.steps} steps")
     ax.figure.savefig(directory / "design.png", dpi=150)
     ax = fj.plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)
