@@ -27,7 +27,9 @@ integrals.) A rigid body is the same data with `n_q = 0`.
 """
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from ._fe import RodMesh
@@ -48,9 +50,70 @@ class BodyData(eqx.Module):
     marker_positions: Float[Array, "n_markers 2"]
     marker_modes: Float[Array, "n_markers 2 n_q"]
 
+    def __check_init__(self):
+        _check_body_data(self)
+
     @property
     def n_modes(self) -> int:
         return self.modal_mass.shape[0]
+
+
+def _check_body_data(data: BodyData) -> None:
+    """Shapes always; values (finite, positive mass and inertia, symmetric positive definite modal mass,
+    symmetric positive semi-definite modal stiffness, skew-symmetric coupling) where they are concrete.
+
+    Body data built inside a traced function (a design map under `jax.jit`) are checked for shape
+    only; the design side guarantees the rest there.
+    """
+    shape = lambda a: tuple(np.shape(a))
+    n_q = shape(data.modal_mass)[0] if len(shape(data.modal_mass)) == 2 else -1
+    n_m = shape(data.marker_positions)[0] if len(shape(data.marker_positions)) == 2 else -1
+    expected = {
+        "mass": (), "first_moment": (2,), "modal_moment": (2, n_q), "inertia": (), "inertia_q": (n_q,),
+        "modal_mass": (n_q, n_q), "coupling_0": (n_q,), "coupling": (n_q, n_q), "modal_stiffness": (n_q, n_q),
+        "marker_positions": (n_m, 2), "marker_modes": (n_m, 2, n_q),
+    }
+    for name, want in expected.items():
+        got = shape(getattr(data, name))
+        if got != want or -1 in want:
+            raise ValueError(
+                f"BodyData.{name} has shape {got}, expected {want} (n_q = {n_q} modes from modal_mass, "
+                f"{n_m} markers from marker_positions); see ffr_jax.rigid_body_data / flexible_body_data."
+            )
+    leaves = [getattr(data, name) for name in expected]
+    if any(isinstance(a, jax.core.Tracer) for a in leaves):
+        return
+    values = {name: np.asarray(getattr(data, name), dtype=float) for name in expected}
+    bad = [name for name, v in values.items() if not np.all(np.isfinite(v))]
+    if bad:
+        raise ValueError(f"BodyData fields {bad} contain NaN or inf.")
+    mass, inertia, s0 = float(values["mass"]), float(values["inertia"]), values["first_moment"]
+    if not mass > 0.0:
+        raise ValueError(f"BodyData.mass must be positive, got {mass}.")
+    # Polar inertia about the frame origin: J0 >= |s0|^2 / m (parallel axes), equality for a point mass.
+    if not inertia >= (s0 @ s0) / mass * (1.0 - 1e-12):
+        raise ValueError(
+            f"BodyData.inertia {inertia} is below |first_moment|^2 / mass = {(s0 @ s0) / mass}: the polar "
+            "moment of inertia about the frame origin cannot be smaller than that of the mass at the centre "
+            "of mass (parallel-axis theorem). Check the inertia's reference point."
+        )
+    if n_q == 0:
+        return
+    m_qq, k_qq, g = values["modal_mass"], values["modal_stiffness"], values["coupling"]
+    tol = 1e-8  # the FE quadratic forms are symmetric up to round-off of sums over the mesh
+    if np.max(np.abs(m_qq - m_qq.T)) > tol * np.max(np.abs(m_qq)):
+        raise ValueError("BodyData.modal_mass must be symmetric.")
+    if np.min(np.linalg.eigvalsh(0.5 * (m_qq + m_qq.T))) <= 0.0:
+        raise ValueError("BodyData.modal_mass must be positive definite (the modes must be linearly independent "
+                         "and carry mass).")
+    if np.max(np.abs(k_qq - k_qq.T)) > tol * max(np.max(np.abs(k_qq)), 1e-300):
+        raise ValueError("BodyData.modal_stiffness must be symmetric.")
+    k_sym = 0.5 * (k_qq + k_qq.T)
+    if np.min(np.linalg.eigvalsh(k_sym)) < -tol * max(np.max(np.abs(k_sym)), 1e-300):
+        raise ValueError("BodyData.modal_stiffness must be positive semi-definite (a negative eigenvalue makes the "
+                         "body unstable).")
+    if np.max(np.abs(g + g.T)) > tol * max(np.max(np.abs(g)), np.max(np.abs(m_qq))):
+        raise ValueError("BodyData.coupling (Phi^T M I~ Phi) must be skew-symmetric.")
 
 
 def rigid_body_data(mass, first_moment, inertia, marker_positions) -> BodyData:

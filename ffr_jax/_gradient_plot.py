@@ -2,10 +2,10 @@
 
 import numpy as np
 
-from ._case import FlexibleRodCase
+from ._case import Case
 
 
-def row_signs(case: FlexibleRodCase, grad) -> list[dict]:
+def row_signs(case: Case, grad) -> list[dict]:
     """The sign pattern of a design gradient, row by row (REFERENCE_CASE §4: outer rows negative,
     inner rows positive in the paper).
 
@@ -36,7 +36,7 @@ def row_signs(case: FlexibleRodCase, grad) -> list[dict]:
     return rows
 
 
-def plot_gradient(case: FlexibleRodCase, grad, *, title: str | None = None, figure=None):
+def plot_gradient(case: Case, grad, *, title: str | None = None, figure=None):
     """Draw a design gradient over the rod like the paper's Figs. 5–6: a surface above the design
     region of the rod's reference domain, and below it the same field as a signed colour map.
 

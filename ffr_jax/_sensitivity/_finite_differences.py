@@ -1,10 +1,10 @@
 """Central finite differences in the design variables."""
 
+import diffrax
 import jax
 import jax.numpy as jnp
 
-from .._simulate import simulate
-from ._base import AbstractSensitivity
+from ._base import AbstractSensitivity, psi_of
 
 
 class FiniteDifferences(AbstractSensitivity):
@@ -23,16 +23,16 @@ class FiniteDifferences(AbstractSensitivity):
     entries: tuple[int, ...] | None = None
     batch_size: int = 8
 
-    def value_and_grad_scene(self, case, scene, *, rtol, atol, solver, max_steps):
-        raise ValueError("Finite differences act on the design, not on the scene parameters: use "
-                         "value_and_grad(case, x, 'fd'), or another method (e.g. 'adjoint') for scene gradients.")
+    def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
+        raise ValueError("Finite differences act on the design, not on the problem's parameters: use "
+                         "value_and_grad(case, x, 'fd'), or another method (e.g. 'adjoint') for problem gradients.")
 
     def value_and_grad_design(self, case, x, *, rtol, atol, solver, max_steps):
+        adjoint = diffrax.RecursiveCheckpointAdjoint()
+
         def psi(xx):
-            return simulate(
-                case.model, case.scene(xx), case.t0, case.t1, case.y_r0, case.z_r0, integrand=case.integrand,
-                solver=solver, rtol=rtol, atol=atol, max_steps=max_steps, jump_ts=case.jump_ts,
-            ).psi
+            return psi_of(case.problem.with_scene(case.scene(xx)), rtol=rtol, atol=atol, solver=solver,
+                          max_steps=max_steps, adjoint=adjoint)
 
         idx = jnp.arange(x.size) if self.entries is None else jnp.asarray(self.entries, int)
         n = idx.size

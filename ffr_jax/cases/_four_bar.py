@@ -4,10 +4,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._body_data import rigid_body_data
-from .._case import FlexibleRodCase
+from .._case import Case, RodDesignMap
 from .._fe import RodMesh
-from .._model import MinimalModel, choose_partition
+from .._model import choose_partition
 from .._objective._compliance import Compliance
+from .._problem import Problem
 from .._scene._angle_driver import AngleDriver
 from .._scene._body import Body
 from .._scene._ground_revolute import GroundRevolute
@@ -78,7 +79,7 @@ def four_bar(
     height: float = 0.06,
     thickness: float = 0.01,
     material: SIMP = SIMP(),
-) -> FlexibleRodCase:
+) -> Case:
     """A crank–rocker four-bar: rigid crank, flexible coupler (the design rod), rigid rocker.
 
     Bodies (in this order): the crank, a uniform bar of length `crank` pivoting about the inertial
@@ -100,7 +101,7 @@ def four_bar(
     - `speed`, `t_ramp`: crank run-up; `crank_mass`, `rocker_mass`: rigid link masses.
     - `length`, `height`, `thickness`, `material`: the coupler rod.
 
-    **Returns:** a [`FlexibleRodCase`][] with `body = 1` (the coupler).
+    **Returns:** a [`Case`][] whose design map's `body = 1` (the coupler).
     """
     links = {"crank": crank, "coupler": length, "rocker": rocker, "ground": ground}
     if min(links.values()) <= 0:
@@ -137,21 +138,9 @@ def four_bar(
     y_r0 = jnp.zeros(n_r)
     rigid = tuple(range(3)) + (3, 4, 5) + tuple(range(n_r - 3, n_r))
     y_r0 = y_r0.at[np.asarray(rigid)].set(guess(0.0, jnp.zeros(n_modes), scene))
-    z_r0 = jnp.zeros(n_r)
     partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=rigid)
     if partition.dependent != rigid:
         raise ValueError(f"The four-bar's rigid coordinates {rigid} are not a regular dependent set at phi = 0.")
-    model = MinimalModel(partition=partition, reference_dependent=y_r0[np.asarray(rigid)], dependent_guess=guess)
-    return FlexibleRodCase(
-        design=design,
-        n_modes=n_modes,
-        body=1,
-        scene_template=scene,
-        model=model,
-        integrand=Compliance(body=1),
-        t0=0.0,
-        t1=float(t1),
-        y_r0=y_r0,
-        z_r0=z_r0,
-        jump_ts=law.breakpoints,
-    )
+    problem = Problem(scene, t1, positions=y_r0, objective=Compliance(body=1), partition=partition,
+                      dependent_guess=guess)
+    return Case(problem=problem, design_map=RodDesignMap(design=design, n_modes=n_modes, body=1))

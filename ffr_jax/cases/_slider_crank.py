@@ -1,17 +1,15 @@
 """The flexible slider–crank of the paper (Sect. 4), exactly as fixed in REFERENCE_CASE.md."""
 
-import functools
-
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .._body_data import flexible_body_data
-from .._case import FlexibleRodCase
+from .._case import Case, RodDesignMap
 from .._fe import RodMesh, mass_matrix, stiffness_matrix
-from .._model import MinimalModel, choose_partition
 from .._modes import hinged_modes
 from .._objective._compliance import Compliance
+from .._problem import Problem
 from .._scene._body import Body
 from .._scene._laws import RampLaw
 from .._scene._point_on_line import PointOnLine
@@ -22,17 +20,22 @@ from .._sparse_fe import resolve_fe_path, sparse_mass_matrix, sparse_stiffness_m
 from .._sparse_modes import sparse_hinged_modes
 
 
-def _rigid_slider_crank_guess(t, y, scene, *, length):
-    """Rigid-body estimate of `(R_x, R_y, theta)`: `R = P(t)`, `sin theta = -P_y / l`."""
+def slider_crank_guess(t, y, scene):
+    """Rigid-body estimate of `(R_x, R_y, theta)`: `R = P(t)`, `sin theta = -P_y / l`.
+
+    The rod length `l` is read from the scene (the undeformed position of B, marker 1), so the
+    estimate holds for every member of the family.
+    """
     del y
     pin = scene.constraints[0].pin(t)
+    length = scene.bodies[0].data.marker_positions[1, 0]
     return jnp.stack([pin[0], pin[1], -jnp.arcsin(pin[1] / length)])
 
 
 def rod_template(design: RodDesign, n_modes: int, value: float = 0.5, fe_path: str = "auto"):
     """Body data of the rod at a uniform design (used to build scenes and choose partitions).
 
-    `fe_path` (`"auto"`, `"dense"`, `"sparse"`) picks the FE path as for [`FlexibleRodCase`][].
+    `fe_path` (`"auto"`, `"dense"`, `"sparse"`) picks the FE path as for [`RodDesignMap`][].
     Compiled as one function: op-by-op dispatch of the body-data products costs seconds.
     """
     return _uniform_rod_data(design, n_modes, value, fe_path)
@@ -68,7 +71,7 @@ def slider_crank(
     thickness: float = 0.01,
     material: SIMP = SIMP(),
     fe_path: str = "auto",
-) -> FlexibleRodCase:
+) -> Case:
     """The flexible slider–crank (REFERENCE_CASE.md, paper Sect. 4) and its family of small variants.
 
     A rigid crank of eccentricity `eps` turns about the inertial origin with the prescribed angle
@@ -86,7 +89,8 @@ def slider_crank(
       100 x 6 rod and up to 1000 x 100 and beyond), `"dense"` or `"sparse"`; both paths give the
       same numbers. Forward mode (`jax.jvp`) with respect to `x` needs `"dense"`.
 
-    **Returns:** a [`FlexibleRodCase`][].
+    **Returns:** a [`Case`][]: the [`Problem`][] with the rod's compliance as objective and a
+    [`RodDesignMap`][] of the rod.
     """
     if not 0 < eccentricity < length:
         raise ValueError(
@@ -107,26 +111,5 @@ def slider_crank(
         ),
     )
     y_r0 = jnp.zeros(scene.n_coordinates).at[0].set(eccentricity)
-    z_r0 = jnp.zeros(scene.n_coordinates)
-    partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=(0, 1, 2))
-    model = MinimalModel(
-        partition=partition,
-        reference_dependent=y_r0[np.asarray(partition.dependent)],
-        dependent_guess=functools.partial(_rigid_slider_crank_guess, length=length)
-        if partition.dependent == (0, 1, 2)
-        else None,
-    )
-    return FlexibleRodCase(
-        design=design,
-        n_modes=n_modes,
-        body=0,
-        scene_template=scene,
-        model=model,
-        integrand=Compliance(body=0),
-        t0=0.0,
-        t1=float(t1),
-        y_r0=y_r0,
-        z_r0=z_r0,
-        jump_ts=law.breakpoints,
-        fe_path=fe_path,
-    )
+    problem = Problem(scene, t1, positions=y_r0, objective=Compliance(body=0), dependent_guess=slider_crank_guess)
+    return Case(problem=problem, design_map=RodDesignMap(design=design, n_modes=n_modes, body=0, fe_path=fe_path))
