@@ -71,6 +71,18 @@ class Interface(eqx.Module):
         return tuple(dofs), u
 
 
+def _rigid_rank(mesh: QuadMesh, fixed: tuple[int, ...]) -> int:
+    """Rank of the plane rigid motions (`u_x`, `u_y`, rotation) restricted to the held dofs (3 if they fix the body)."""
+    if not fixed:
+        return 0
+    fixed = np.asarray(fixed)
+    xy = mesh.nodes - mesh.nodes.mean(axis=0)
+    xy = xy / np.abs(xy).max()
+    node, is_y = np.divmod(fixed, 2)
+    rows = np.stack([1.0 - is_y, is_y.astype(float), np.where(is_y, xy[node, 0], -xy[node, 1])], axis=1)
+    return int(np.linalg.matrix_rank(rows, tol=1e-9))
+
+
 class ReductionLayout:
     """The static layout of a modal basis on one mesh: held, interface and interior dofs, patterns.
 
@@ -86,6 +98,13 @@ class ReductionLayout:
         self.mesh = mesh
         self.fixed = tuple(sorted(set(fixed)))
         fixed_set = frozenset(self.fixed)
+        rank = _rigid_rank(mesh, self.fixed)
+        if rank < 3:
+            raise ValueError(
+                f"The reference conditions do not remove the rigid-body motions (the held degrees of freedom "
+                f"constrain rank {rank} of the 3 plane rigid motions): hold both displacements of one node and one "
+                "more displacement elsewhere (e.g. HingedHinged(a, b)), or clamp a set of nodes."
+            )
         boundary, blocks, owner = [], [], {}
         for k, interface in enumerate(interfaces):
             dofs, u = interface.patterns(mesh, fixed_set)
