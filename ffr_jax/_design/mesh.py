@@ -348,9 +348,15 @@ def read_mesh(path) -> QuadMesh:
     return from_meshio(meshio.read(path))
 
 
-def write_mesh(path, mesh: QuadMesh, cell_data: dict[str, np.ndarray] | None = None) -> None:
-    """Write a [`QuadMesh`][] through `meshio` (format from the file extension)."""
+def write_mesh(path, mesh: QuadMesh, cell_data: dict[str, np.ndarray] | None = None,
+               file_format: str | None = None) -> None:
+    """Write a [`QuadMesh`][] and per-element data through `meshio`.
+
+    The format follows the file extension unless `file_format` names one (e.g. `"gmsh22"`, which
+    keeps `gmsh:physical` tags; meshio's default Gmsh 4.1 writer drops them).
+    """
     import meshio
 
     data = {k: [np.asarray(v)] for k, v in (cell_data or {}).items()}
-    meshio.write(path, meshio.Mesh(np.asarray(mesh.nodes), [("quad", np.asarray(mesh.elements))], cell_data=data))
+    meshio.write(path, meshio.Mesh(np.asarray(mesh.nodes), [("quad", np.asarray(mesh.elements))], cell_data=data),
+                 file_format=file_format)
