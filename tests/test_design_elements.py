@@ -138,7 +138,8 @@ def test_cantilever_bending_q4_locks_qm6_converges():
     The parasitic shear of Q4 stiffens bending by a factor `1 + c (dx / h)^2`, so its error
     falls with order 2 in the element length and is large on elongated elements (the issue saw
     35 %, 10 %, 2.6 % at 100 / 200 / 400 x 2). QM6 has no parasitic shear and is converged at
-    the coarsest mesh. Measured figures: benchmarks/RESULTS.md, "Bending of a slender beam".
+    the coarsest mesh (error -2.3e-5 .. -3.4e-5). Measured figures: benchmarks/RESULTS.md, "Elements:
+    bending of a slender beam, plate with a hole".
     """
     meshes = (100, 200, 400)
     q4_error = []

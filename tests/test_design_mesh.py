@@ -133,6 +133,8 @@ def test_identity_is_by_content():
     assert fd.QuadMesh(nodes, elements[::-1]) != a, "element order is part of the mesh"
     with pytest.raises(ValueError, match="read-only"):
         a.nodes[0, 0] = 1.0
+    with pytest.raises(AttributeError, match="immutable"):
+        a.nodes = moved
 
 
 def test_jit_caches_one_program_per_mesh_content():

@@ -128,7 +128,7 @@ class QuadMesh:
         self.nodes = nodes
         self.elements = elements
         self.digest = digest.hexdigest()
-        self._hash = hash(self.digest)
+        self._hash = hash(self.digest)  # set last: the mesh is frozen from here on
 
     @staticmethod
     def _orient(nodes, elements, orientation, min_ratio):
@@ -187,6 +187,11 @@ class QuadMesh:
         renumber = np.full(nodes.shape[0], -1, dtype=np.int64)
         renumber[kept] = np.arange(kept.size)
         return QuadMesh(nodes[kept], renumber[elements]), kept
+
+    def __setattr__(self, name, value):
+        if hasattr(self, "_hash"):
+            raise AttributeError(f"QuadMesh is immutable (cannot set {name!r}); build a new mesh instead.")
+        object.__setattr__(self, name, value)
 
     # --- identity ---------------------------------------------------------------------------
     def __hash__(self) -> int:

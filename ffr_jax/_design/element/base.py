@@ -33,7 +33,7 @@ def jacobians(dn: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
 
     **Returns:** `(J, det J, J^-1)`, `J[e, i, j] = d x_j / d xi_i`, shapes `(m, 2, 2)`, `(m,)`, `(m, 2, 2)`.
     """
-    jac = np.einsum("ia,eaj->eij", dn, xy)
+    jac = dn @ xy
     det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
     inv = np.stack([np.stack([jac[:, 1, 1], -jac[:, 0, 1]], -1), np.stack([-jac[:, 1, 0], jac[:, 0, 0]], -1)], 1)
     return jac, det, inv / det[:, None, None]

@@ -21,6 +21,6 @@ class Q4(AbstractElement):
         for (xi, eta), w in gauss_points_2x2():
             _, dn = bilinear(xi, eta)
             _, det, inv = jacobians(dn, xy)
-            b = strain_matrix(np.einsum("eij,ja->eia", inv, dn))
-            k += (w * thickness * det)[:, None, None] * np.einsum("eki,kl,elj->eij", b, d, b)
+            b = strain_matrix(inv @ dn)
+            k += (w * thickness * det)[:, None, None] * (np.swapaxes(b, 1, 2) @ (d @ b))
         return k, consistent_mass(xy, thickness)

@@ -46,14 +46,14 @@ class QM6(AbstractElement):
         for (xi, eta), w in gauss_points_2x2():
             _, dn = bilinear(xi, eta)
             _, det, inv = jacobians(dn, xy)
-            b_u = strain_matrix(np.einsum("eij,ja->eia", inv, dn))
+            b_u = strain_matrix(inv @ dn)
             dp = np.array([[-2.0 * xi, 0.0], [0.0, -2.0 * eta]])  # d(1 - xi^2, 1 - eta^2) / d(xi, eta)
-            b_a = (det0 / det)[:, None, None] * strain_matrix(np.einsum("eij,ja->eia", inv0, dp))
+            b_a = (det0 / det)[:, None, None] * strain_matrix(inv0 @ dp)
             weight = (w * thickness * det)[:, None, None]
-            db_a = np.einsum("kl,elj->ekj", d, b_a)
-            k_uu += weight * np.einsum("eki,kl,elj->eij", b_u, d, b_u)
-            k_ua += weight * np.einsum("eki,ekj->eij", b_u, db_a)
-            k_aa += weight * np.einsum("eki,ekj->eij", b_a, db_a)
+            b_u_t, db_a = np.swapaxes(b_u, 1, 2), d @ b_a
+            k_uu += weight * (b_u_t @ (d @ b_u))
+            k_ua += weight * (b_u_t @ db_a)
+            k_aa += weight * (np.swapaxes(b_a, 1, 2) @ db_a)
         k = k_uu - k_ua @ np.linalg.solve(k_aa, np.swapaxes(k_ua, 1, 2))
         k = 0.5 * (k + np.swapaxes(k, 1, 2))
         return k, consistent_mass(xy, thickness)
