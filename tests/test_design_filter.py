@@ -12,7 +12,7 @@ import ffr_jax._design as fd
 ROUNDOFF = 1e-13
 
 
-@pytest.mark.parametrize("nx, ny, radius", [(12, 4, 1.5), (12, 4, 2.7), (10, 6, 0.9), (100, 6, 1.5)])
+@pytest.mark.parametrize("nx, ny, radius", [(12, 4, 2.7), (10, 6, 0.9), (100, 6, 1.5)])
 def test_equals_todays_filter_on_the_rod_grid(nx, ny, radius):
     """Radius in element sizes (`scale = (dx, dy)`), elements of aspect ratio up to 5.6 (12 x 4)."""
     old = ffr_jax.DensityFilter(ffr_jax.RodDesign(ffr_jax.RodMesh(nx, ny), ffr_jax.SIMP()), radius)

@@ -105,26 +105,27 @@ def test_link_modes_with_interfaces_at_the_pin_holes(link):
     pin centres; the gradient of a body-data invariant against central differences."""
     body = _link_body(link)
     x = body.initial_design(0.5)
-    basis = eqx.filter_jit(lambda b, x: b.modes(x))(body, x)
+
+    @eqx.filter_jit
+    def stage(body, x):
+        def invariant(x):
+            d = body.body_data(x)
+            mq_inv = jnp.linalg.inv(d.modal_mass)
+            return jnp.trace(mq_inv @ d.modal_stiffness) * 1e-8 + jnp.sum(d.modal_moment @ mq_inv @ d.modal_moment.T), d
+
+        (value, data), grad = jax.value_and_grad(invariant, has_aux=True)(x)
+        return body.modes(x), data, value, grad
+
+    basis, data, _, g = stage(body, x)
     assert basis.n_static == 3 and basis.modes.shape == (link.mesh.n_dof, 7)
     assert np.all(np.diff(np.asarray(basis.eigenvalues)) > 0) and basis.eigenvalues[0] > 0
-    data = eqx.filter_jit(lambda b, x: b.body_data(x))(body, x)
     np.testing.assert_allclose(data.marker_positions, link.centres, atol=1e-3 * 0.008, err_msg="markers at pin centres")
     assert np.all(np.asarray(data.marker_modes[0]) == 0.0), "the clamped hole has no elastic displacement"
     np.testing.assert_allclose(data.marker_modes[1][:, 4:], np.eye(2, 3), atol=1e-12,
                                err_msg="hole B's centre follows the translations of its rigid interface")
-
-    def invariant(body, x):
-        d = body.body_data(x)
-        mq_inv = jnp.linalg.inv(d.modal_mass)
-        return jnp.trace(mq_inv @ d.modal_stiffness) * 1e-8 + jnp.sum(d.modal_moment @ mq_inv @ d.modal_moment.T)
-
-    value_and_grad = eqx.filter_jit(lambda b, x: jax.value_and_grad(lambda x: invariant(b, x))(x))
-    _, g = value_and_grad(body, x)
     assert g.shape == (link.domain.n_design,) and np.all(np.isfinite(np.asarray(g)))
     step = 1e-4  # central differences: truncation step^2 ~ 1e-8, round-off eps / step ~ 1e-12 relative
-    f = eqx.filter_jit(invariant)
-    for e in np.argsort(-np.abs(np.asarray(g)))[:3]:
+    for e in np.argsort(-np.abs(np.asarray(g)))[:2]:
         unit = jnp.zeros(body.n_design).at[e].set(step)
-        fd_ = (f(body, x + unit) - f(body, x - unit)) / (2 * step)
+        fd_ = (stage(body, x + unit)[2] - stage(body, x - unit)[2]) / (2 * step)
         assert_close_relative(g[e], fd_, 1e-5, f"d invariant / d x_{e} vs central differences")

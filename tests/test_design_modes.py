@@ -220,24 +220,10 @@ def test_body_data_is_covariant_under_any_change_of_basis():
 
 
 @pytest.mark.parametrize("kind", KINDS)
-def test_dense_jvp_matches_finite_differences(kind):
-    body = _body(kind, fd.DenseModes())
-    x = _design(body, 2)
-    v = _unit(body.n_design, 20)
-    tangent = _invariants_jvp(body, x, v)
-    fd_ = _five_point(lambda x: _invariants_jit(body, x), x, v)
-    for i, (t, f) in enumerate(zip(np.asarray(tangent), np.asarray(fd_))):
-        np.testing.assert_allclose(t, f, rtol=FD_RTOL, err_msg=f"JVP vs FD: {NAMES[i]} ({kind})")
-    if kind == "craig-bampton":  # reverse mode of the dense path (transposed JVP rule), once
-        jacobian = _invariants_jacobian(body, x)
-        for i, t in enumerate(np.asarray(tangent)):
-            np.testing.assert_allclose(jacobian[i] @ v, t, rtol=1e-12, err_msg=f"dense VJP vs JVP: {NAMES[i]}")
-
-
-@pytest.mark.parametrize("kind", KINDS)
-def test_lanczos_vjp_matches_dense_jvp_and_finite_differences(kind):
-    """Every gradient of the Lanczos path, dotted with a direction, against the dense forward mode
-    (same derivative by another algorithm) and against finite differences."""
+def test_derivatives_dense_jvp_lanczos_vjp_and_finite_differences(kind):
+    """Every invariant's derivative along a direction three ways: dense forward mode (the custom JVP
+    rule and autodiff of the static solves), Lanczos reverse mode (host sparse solves), and
+    five-point finite differences."""
     dense, lanczos = _body(kind, fd.DenseModes()), _body(kind, fd.LanczosModes())
     x = _design(dense, 2)
     v = _unit(dense.n_design, 20)
@@ -245,8 +231,9 @@ def test_lanczos_vjp_matches_dense_jvp_and_finite_differences(kind):
     fd_ = _five_point(lambda x: _invariants_jit(dense, x), x, v)
     jacobian = _invariants_jacobian(lanczos, x)
     for i in range(tangent.shape[0]):
-        np.testing.assert_allclose(jacobian[i] @ v, tangent[i], rtol=GRAD_RTOL, err_msg=f"Lanczos VJP vs dense JVP: {NAMES[i]}")
-        np.testing.assert_allclose(jacobian[i] @ v, fd_[i], rtol=FD_RTOL, err_msg=f"Lanczos VJP vs FD: {NAMES[i]}")
+        np.testing.assert_allclose(tangent[i], fd_[i], rtol=FD_RTOL, err_msg=f"dense JVP vs FD: {NAMES[i]} ({kind})")
+        np.testing.assert_allclose(jacobian[i] @ v, tangent[i], rtol=GRAD_RTOL,
+                                   err_msg=f"Lanczos VJP vs dense JVP: {NAMES[i]} ({kind})")
 
 
 # --- crossing retained eigenvalues -----------------------------------------------------------------
@@ -287,19 +274,53 @@ def _crossing_design(body):
     return jnp.asarray(design_at(res.x)), res.fun
 
 
-def test_derivative_stable_at_crossing_retained_eigenvalues():
-    dense, lanczos = _rod_body(fd.DenseModes()), _rod_body(fd.LanczosModes())
-    x, gap = _crossing_design(dense)
+def test_lanczos_derivative_stable_at_crossing_retained_eigenvalues():
+    lanczos = _rod_body(fd.LanczosModes())
+    x, gap = _crossing_design(lanczos)
     assert gap < 1e-7, f"no crossing found (relative gap {gap:.1e})"
-    v = _unit(dense.n_design, 50)
-    fd_ = _five_point(lambda x: _invariants_jit(dense, x), x, v, step=1e-4)
-    tangent = _invariants_jvp(dense, x, v)
+    v = _unit(lanczos.n_design, 50)
+    fd_ = _five_point(lambda x: _invariants_jit(lanczos, x), x, v, step=1e-4)
     jacobian = _invariants_jacobian(lanczos, x)
-    assert np.all(np.isfinite(np.asarray(jacobian))), "finite Lanczos gradients at the crossing"
+    assert np.all(np.isfinite(np.asarray(jacobian))), "finite gradients at the crossing"
     for i in range(fd_.shape[0]):
-        np.testing.assert_allclose(tangent[i], fd_[i], rtol=FD_RTOL, err_msg=f"dense JVP vs FD at crossing: {NAMES[i]}")
-        np.testing.assert_allclose(jacobian[i] @ v, tangent[i], rtol=GRAD_RTOL,
-                                   err_msg=f"Lanczos VJP vs dense JVP at crossing: {NAMES[i]}")
+        np.testing.assert_allclose(jacobian[i] @ v, fd_[i], rtol=FD_RTOL, err_msg=f"Lanczos VJP vs FD at crossing: {NAMES[i]}")
+
+
+def _pencil_with_spectrum(eigenvalues, seed):
+    """`(K, M)` with prescribed generalized eigenvalues: `M` random SPD, `V = L^-T Q`, `K = M V diag(lam) V^T M`."""
+    n = len(eigenvalues)
+    rng = np.random.default_rng(seed)
+    b = rng.normal(size=(n, n))
+    m = b @ b.T + n * np.eye(n)
+    q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    v = np.linalg.solve(np.linalg.cholesky(m).T, q)
+    k = m @ v @ np.diag(eigenvalues) @ v.T @ m
+    return jnp.asarray(0.5 * (k + k.T)), jnp.asarray(m)
+
+
+@pytest.mark.parametrize("spectrum", [[1.0, 2.0, 3.0, 3.0, 5.0, 6.0, 7.0, 8.0], [0.5, 3.0, 3.0, 3.0, 4.0, 6.0, 6.0, 9.0]],
+                         ids=["double", "triple"])
+def test_dense_rule_at_coincident_retained_eigenvalues(spectrum):
+    """`retained_eigenpairs` (the dense solver's rule): span invariants along a path through coincident
+    retained eigenvalues have finite forward and reverse derivatives equal to finite differences."""
+    n_modes = 4
+    k, m = _pencil_with_spectrum(spectrum, 0)
+    rng = np.random.default_rng(1)
+    dk, dm = (jnp.asarray(0.5 * (a + a.T)) for a in (rng.normal(size=(8, 8)), 0.1 * rng.normal(size=(8, 8))))
+    w = jnp.asarray(rng.normal(size=(8, 8)))
+
+    @jax.jit
+    def along_path(t):
+        kt, mt = k + t * dk, m + t * dm
+        lam, phi = fd.retained_eigenpairs(kt, mt, n_modes)
+        return jnp.stack([jnp.sum(lam), jnp.trace(phi.T @ kt @ phi), jnp.sum(w * (phi @ phi.T @ mt))])
+
+    t0 = jnp.array(0.0)
+    _, forward = jax.jvp(along_path, (t0,), (jnp.array(1.0),))
+    reverse = jax.jacrev(along_path)(t0)
+    fd_ = _five_point(along_path, t0, jnp.array(1.0), step=1e-4)
+    np.testing.assert_allclose(forward, fd_, rtol=FD_RTOL, err_msg="JVP vs FD (eigenvalue sum, trace, projector)")
+    np.testing.assert_allclose(reverse, forward, rtol=1e-12, err_msg="reverse vs forward mode")
 
 
 # --- bad input -----------------------------------------------------------------------------------
