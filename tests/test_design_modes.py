@@ -357,3 +357,11 @@ def test_auto_modes_choose_by_size():
     small, large = _body("hinged", fd.AutoModes()), _rod_body(fd.AutoModes(), nx=100, ny=6)
     assert isinstance(small.reduction.solver.choose(small.model), fd.DenseModes)
     assert isinstance(large.reduction.solver.choose(large.model), fd.LanczosModes), "the reference rod is sparse"
+
+
+def test_lanczos_batch_of_designs_under_vmap():
+    body = _body("craig-bampton", fd.LanczosModes())
+    xs = jnp.stack([_design(body, s) for s in (5, 6)])
+    batched = eqx.filter_jit(eqx.filter_vmap(lambda x: body.frequencies(x)))(xs)
+    for b in range(2):
+        assert_close_relative(batched[b], _modes_jit(body, xs[b]).frequencies, 1e-12, f"vmap frequencies, design {b}")
