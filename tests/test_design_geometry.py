@@ -71,8 +71,10 @@ def test_link_mesh_is_valid_and_its_rims_are_passive(link, tmp_path):
     mesh, domain = link.mesh, link.domain
     assert mesh.n_elements > 500 and np.all(mesh.element_areas() > 0) and mesh.jacobian_ratios().min() > 0.05
     area = 0.2 * 0.05 + np.pi * 0.025**2 - 2 * np.pi * 0.008**2
-    # The polygonal boundary cuts the circles' segments: an area error O(h^2 / R) per unit length.
-    np.testing.assert_allclose(mesh.element_areas().sum(), area, rtol=2e-2, err_msg="meshed area")
+    # A circle drawn as an n-gon loses pi R^2 (2 pi / n)^2 / 6 of its area: the two 14-gon holes
+    # 1.2e-3 of the link's area (the link gains it), the rounded ends (about 39 sides per circle)
+    # 0.7e-3 (the link loses it); |error| <= their sum, 2e-3 (measured +4.6e-4, their difference).
+    np.testing.assert_allclose(mesh.element_areas().sum(), area, rtol=2e-3, err_msg="meshed area")
     for rim, centre in zip(link.rims, link.centres):
         assert len(rim) >= 8
         np.testing.assert_allclose(np.linalg.norm(mesh.nodes[list(rim)] - centre, axis=1), 0.008, rtol=1e-6)
