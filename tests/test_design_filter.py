@@ -1,0 +1,47 @@
+"""The density filter on any mesh: equal to today's filter on the rod grid, a proper averaging map."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ffr_jax
+import ffr_jax._design as fd
+
+# Two evaluations of the same weights by different operations: centroids up to 100 element sizes
+# from the origin (the 100 x 6 rod) carry eps * 100 ~ 2e-14 of an element size in each distance.
+ROUNDOFF = 1e-13
+
+
+@pytest.mark.parametrize("nx, ny, radius", [(12, 4, 2.7), (10, 6, 0.9), (100, 6, 1.5)])
+def test_equals_todays_filter_on_the_rod_grid(nx, ny, radius):
+    """Radius in element sizes (`scale = (dx, dy)`), elements of aspect ratio up to 5.6 (12 x 4)."""
+    old = ffr_jax.DensityFilter(ffr_jax.RodDesign(ffr_jax.RodMesh(nx, ny), ffr_jax.SIMP()), radius)
+    rod = ffr_jax.RodMesh(nx, ny)
+    new = fd.DensityFilter(fd.rod_domain(nx, ny), radius, scale=(rod.dx, rod.dy))
+    np.testing.assert_allclose(new.matrix(), old.matrix(), rtol=0, atol=ROUNDOFF, err_msg="H")
+    x = jnp.asarray(np.random.default_rng(0).uniform(0.01, 1.0, old.weights.shape[0]))
+    np.testing.assert_allclose(new(x), old(x), rtol=ROUNDOFF)
+    np.testing.assert_allclose(new.transpose(x), old.transpose(x), rtol=ROUNDOFF)
+
+
+def test_filter_on_an_unstructured_mesh_with_passive_elements():
+    plate = fd.plate_with_hole(1.0, 0.2, 6, grading=1.5)  # element areas vary by a factor ~10
+    ring = np.arange(plate.mesh.n_elements) % 6  # radial layer of each element
+    domain = fd.DesignDomain.from_masks(plate.mesh, solid=ring == 0, void=ring == 5)
+    filt = fd.DensityFilter(domain, radius=0.12)
+    h = np.asarray(filt.matrix())
+    assert h.shape == (domain.n_design, domain.n_design), "passive elements take no part"
+    np.testing.assert_allclose(h.sum(axis=1), 1.0, rtol=ROUNDOFF, err_msg="rows sum to one")
+    assert np.all(h >= 0.0) and np.count_nonzero(h) > 3 * domain.n_design, "an averaging map over neighbours"
+    # Area weighting: w_ei a_i / sum_i w_ei a_i, so the mean over the domain weighted by area ...
+    c = domain.design_centroids()
+    d = np.linalg.norm(c[:, None] - c[None], axis=-1)
+    w = np.maximum(0.12 - d, 0.0) * domain.design_areas()[None]
+    np.testing.assert_allclose(h, w / w.sum(axis=1, keepdims=True), rtol=0, atol=ROUNDOFF, err_msg="cone weights")
+    rng = np.random.default_rng(2)
+    x, g = jnp.asarray(rng.uniform(size=domain.n_design)), jnp.asarray(rng.normal(size=domain.n_design))
+    np.testing.assert_allclose(g @ filt(x), filt.transpose(g) @ x, rtol=1e-13, err_msg="transpose is the adjoint")
+    np.testing.assert_allclose(filt.volume_weights(), h.sum(axis=0), rtol=1e-13)
+    assert np.array_equal(np.asarray(fd.DensityFilter(domain, 0.0).matrix()), np.eye(domain.n_design)), "r = 0: H = I"
+    with pytest.raises(ValueError, match="non-negative"):
+        fd.DensityFilter(domain, -1.0)
