@@ -63,7 +63,9 @@ class Problem(eqx.Module):
         - `dependent_guess`: `(t, y, scene) -> y_d`, a starting point of Newton's method along the
           motion (default: the initial dependent positions).
         - `check_terminal`: refuse a terminal term that depends only on coordinates the
-          constraints fix (it cannot be changed by the motion; see the README).
+          constraints fix (at the initial state its derivative is nonzero only on coordinates
+          whose rows of `dy_r/dy` and `dz_r/dz` vanish, such as a driven crank's pin): the motion
+          cannot change such a term, which is almost always a mistake in the objective.
         """
         t0, t1 = _time(t0, "t0"), _time(t1, "t1")
         if not t1 > t0:
@@ -76,7 +78,7 @@ class Problem(eqx.Module):
             rigid = tuple(o + k for o in scene.offsets for k in range(3))
             partition = choose_partition(scene, t0, positions, prefer_dependent=rigid)
         f = partition.n_independent
-        y0, guess = model_split(partition, positions)
+        y0, guess = _split(partition, positions)
         redundant_velocities = None
         if velocities is None:
             z0 = np.zeros(f)
@@ -84,13 +86,13 @@ class Problem(eqx.Module):
             z0 = _vector(velocities, f, "velocities", scene)
         else:
             redundant_velocities = _vector(velocities, n, "velocities", scene, independent=f)
-            z0 = model_split(partition, redundant_velocities)[0]
+            z0 = _split(partition, redundant_velocities)[0]
         model = MinimalModel(partition=partition, reference_dependent=jnp.asarray(guess),
                              dependent_guess=dependent_guess)
         y_r0, z_r0 = _assemble(model, scene, t0, jnp.asarray(y0), jnp.asarray(z0))
         if redundant_velocities is not None:
             _check_velocities(model, scene, z_r0, redundant_velocities)
-        model = eqx.tree_at(lambda m: m.reference_dependent, model, jnp.asarray(model_split(partition, y_r0)[1]))
+        model = eqx.tree_at(lambda m: m.reference_dependent, model, jnp.asarray(_split(partition, y_r0)[1]))
         y0, z0 = jnp.asarray(y0), jnp.asarray(z0)
         self.scene, self.model = scene, model
         self.objective = as_objective(objective)
@@ -130,7 +132,7 @@ class Problem(eqx.Module):
         return problem
 
 
-def model_split(partition: Partition, v_r):
+def _split(partition: Partition, v_r):
     """`(v, v_d)`: the independent and dependent entries of a redundant vector (NumPy)."""
     v_r = np.asarray(v_r)
     return v_r[list(partition.independent)], v_r[list(partition.dependent)]
