@@ -64,7 +64,7 @@ def _simulate_problem(problem, solver, rtol, atol, ts, dense, max_steps, adjoint
     return solve_minimal(
         problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
         integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol, ts=ts, dense=dense,
-        max_steps=max_steps, adjoint=adjoint, jump_ts=problem.jump_ts, dt0=dt0,
+        max_steps=max_steps, adjoint=adjoint, jump_ts=problem.jump_ts, dt0=problem.dt0 if dt0 is None else dt0,
     )
 
 
