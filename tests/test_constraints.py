@@ -42,9 +42,9 @@ def test_mass_is_the_mass_of_the_consistent_mass_matrix(case):
         np.testing.assert_allclose(mass, body_mass, rtol=1e-13, err_msg="sum rho_e V_e against e_x^T M e_x")
     lightest, heaviest = constraint.range
     mesh = case.mesh
-    interface = 2 * mesh.ny * mesh.dx * mesh.dy * mesh.thickness * case.material.density
+    interface = 2 * mesh.ny * mesh.dx * mesh.dy * case.design.model.thickness * case.material.density
     assert interface < lightest < interface * 1.001, "the lightest design is the interface columns plus voids"
-    np.testing.assert_allclose(heaviest, mesh.length * mesh.height * mesh.thickness * case.material.density,
+    np.testing.assert_allclose(heaviest, mesh.length * mesh.height * case.design.model.thickness * case.material.density,
                                rtol=1e-14, err_msg="mass of the solid rod")
 
 

@@ -33,7 +33,8 @@ FD_REL_TOL = 1e-7
 
 
 def small_design(nx=12, ny=4):
-    return fj.RodDesign(fj.RodMesh(nx, ny), fj.SIMP())
+    """The rod as a designed body (the filter needs its domain, the mass bound its material and element sizes)."""
+    return fj.cases.rod_body(nx, ny, 2)
 
 
 def surrogate(n, seed=0):
@@ -56,12 +57,12 @@ def optimizers(constraint):
 # --- density filter ----------------------------------------------------------------------------
 @pytest.mark.parametrize("radius", [0.0, 1.0, 1.5, 2.5])
 def test_filter_rows_sum_to_one_and_reach_radius(radius):
-    design = small_design()
+    design = small_design().domain
     h = np.asarray(fj.DensityFilter(design, radius).matrix())
     np.testing.assert_allclose(h.sum(axis=1), 1.0, atol=ROUND_OFF, err_msg="rows of H")
     assert np.all(h >= 0.0), "filter weights must be non-negative"
     mesh = design.mesh
-    scaled = design.design_centres() / np.array([mesh.dx, mesh.dy])
+    scaled = design.design_centroids() / np.array([mesh.dx, mesh.dy])
     distance = np.linalg.norm(scaled[:, None] - scaled[None], axis=-1)
     if radius <= 1.0:
         np.testing.assert_array_equal(h, np.eye(len(h)), err_msg="H = I for r <= 1")

@@ -8,15 +8,16 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
-from .._fe import RodMesh, q4_element_matrices
-from .._simp import SIMP, RodDesign
+from .._design.domain import DesignDomain
+from .._design.element.q4 import Q4
+from .._design.geometry import rod_domain
 
 
 class MBBBeam:
     """Minimum compliance of the half MBB beam (Sigmund 2001; Andreassen et al. 2011, "top88").
 
     A `nelx x nely` grid of unit square Q4 plane-stress elements (`E0 = 1`, `nu = 0.3`, thickness
-    1; the element stiffness is the package's `q4_element_matrices`, equal to top88's `KE`).
+    1; the element stiffness is the package's [`Q4`][] element, equal to top88's `KE`).
     The left edge is a symmetry line (`u_x = 0`), the lower right corner sits on a roller
     (`u_y = 0`), and a unit load pulls the upper left corner down. With the modified SIMP law
     `E_e = E_min + x_e^p (E0 - E_min)` of the physical densities, the compliance and its gradient
@@ -29,7 +30,7 @@ class MBBBeam:
     jit-compiled step of the optimisation loop.
 
     The element of row `j` (from the bottom) and column `i` is entry `j nelx + i` of the density
-    vector, the order of a [`RodDesign`][] on a `(nelx + 2) x nely` mesh of unit elements (its
+    vector, the order of the rod's design domain on a `(nelx + 2) x nely` mesh of unit elements (its
     interface columns are not design variables), so the package's [`DensityFilter`][] on
     [`MBBBeam.design`][] is top88's filter on this grid.
 
@@ -48,7 +49,8 @@ class MBBBeam:
         if nelx < 2 or nely < 2 or nely % 2:
             raise ValueError(f"The MBB grid needs nelx >= 2 and an even nely >= 2, got {nelx} x {nely}.")
         self.nelx, self.nely, self.penal, self.e_min = int(nelx), int(nely), float(penal), float(e_min)
-        self.ke = q4_element_matrices(1.0, 1.0, float(nu), 1.0)[0]
+        unit_square = np.array([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]])
+        self.ke = Q4().matrices(unit_square, float(nu), 1.0)[0][0]
         j, i = np.meshgrid(np.arange(nely), np.arange(nelx), indexing="ij")
         i, j = i.ravel(), j.ravel()
         nodes = np.stack([self.node(i, j), self.node(i + 1, j), self.node(i + 1, j + 1), self.node(i, j + 1)], -1)
@@ -66,10 +68,10 @@ class MBBBeam:
         return i * (self.nely + 1) + j
 
     @functools.cached_property
-    def design(self) -> RodDesign:
-        """A [`RodDesign`][] whose design vector has this grid's element order and unit element size
-        (for [`DensityFilter`][]; its mesh has one extra interface column on each side)."""
-        return RodDesign(RodMesh(self.nelx + 2, self.nely, float(self.nelx + 2), float(self.nely)), SIMP())
+    def design(self) -> DesignDomain:
+        """A [`DesignDomain`][] whose design vector has this grid's element order and unit element size
+        (for [`DensityFilter`][]; its mesh has one extra solid column on each side)."""
+        return rod_domain(self.nelx + 2, self.nely, float(self.nelx + 2), float(self.nely))
 
     def displacements(self, x_phys) -> np.ndarray:
         """`U` `(n_dof,)` of the physical densities `(nelx nely,)`."""

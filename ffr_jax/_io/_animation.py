@@ -10,10 +10,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import FlexibleRodCase
+from .._case import Case
 from .._scene._point_on_line import PointOnLine
 from .._scene._prescribed_point import CrankPin
-from .._simulate import simulate
+from .._simulate import solve_minimal
 
 
 class Animation(NamedTuple):
@@ -35,7 +35,7 @@ def _nice(value: float) -> float:
     return float((5 if mantissa >= 5 else 2 if mantissa >= 2 else 1) * 10**exponent)
 
 
-def body_motion(case: FlexibleRodCase, x_phys, ts, *, rtol: float = 1e-8, atol: float = 1e-12):
+def body_motion(case: Case, x_phys, ts, *, rtol: float = 1e-8, atol: float = 1e-12):
     """The motion of the designed body at times `ts`: node positions with and without elasticity.
 
     Simulates the case for the physical densities `x_phys` (output at `ts`), recovers the
@@ -52,16 +52,17 @@ def body_motion(case: FlexibleRodCase, x_phys, ts, *, rtol: float = 1e-8, atol: 
 
 
 @eqx.filter_jit
-def _motion(case: FlexibleRodCase, x_phys, ts, rtol: float, atol: float):
+def _motion(case: Case, x_phys, ts, rtol: float, atol: float):
     """[`body_motion`][] as one compiled program (op by op, the modal analysis and the vmapped Newton
     solves take tens of seconds of dispatch)."""
-    scene = case.scene(x_phys)
+    problem = case.problem_for(x_phys)
+    scene = problem.scene
     modes = case.modes(x_phys).modes.reshape(case.mesh.n_nodes, 2, -1)
-    trajectory = simulate(case.model, scene, case.t0, case.t1, case.y_r0, case.z_r0, ts=ts, rtol=rtol, atol=atol,
-                          jump_ts=case.jump_ts)
-    y_r = jax.vmap(lambda t, y: case.model.positions(t, y, scene))(trajectory.ts, trajectory.ys)
-    offset = scene.offsets[case.body]
-    nodes = jnp.asarray(case.mesh.node_coordinates())
+    trajectory = solve_minimal(problem.model, scene, problem.t0, problem.t1, problem.y0, problem.z0, ts=ts, rtol=rtol,
+                               atol=atol, jump_ts=problem.jump_ts, dt0=problem.dt0)
+    y_r = trajectory.positions
+    offset = scene.offsets[designed_body_index(case)]
+    nodes = jnp.asarray(case.mesh.nodes)
 
     def place(y):
         r, theta, q = y[offset:offset + 2], y[offset + 2], y[offset + 3:offset + 3 + modes.shape[2]]
@@ -72,7 +73,7 @@ def _motion(case: FlexibleRodCase, x_phys, ts, rtol: float, atol: float):
     return rigid, elastic, y_r
 
 
-def animate(case: FlexibleRodCase, x_phys, path, *, frames: int = 60, fps: float = 20.0,
+def animate(case: Case, x_phys, path, *, frames: int = 60, fps: float = 20.0,
             amplification: float | None = None, rtol: float = 1e-8, atol: float = 1e-12, dpi: int = 100,
             title: str | None = None) -> Animation:
     """Write an animation of the case's mechanism over `[t0, t1]`: the designed body drawn deformed,
@@ -165,6 +166,17 @@ def animate(case: FlexibleRodCase, x_phys, path, *, frames: int = 60, fps: float
     return Animation(path, frames, float(amplification), largest)
 
 
+def designed_body_index(case: Case) -> int:
+    """The scene index of the case's one designed body."""
+    return case.scene_template.body_index(case.design_map.names[0]) if len(case.design_map.names) == 1 else \
+        _one_body_error(case)
+
+
+def _one_body_error(case):
+    raise ValueError(f"The animation draws one designed body; this case has {len(case.design_map.names)} "
+                     f"({list(case.design_map.names)}).")
+
+
 def _image(figure):
     from PIL import Image
 
@@ -172,7 +184,7 @@ def _image(figure):
     return Image.fromarray(rgba[..., :3].copy()).convert("P", palette=Image.Palette.ADAPTIVE, colors=255)
 
 
-def _decorations(case: FlexibleRodCase, ts, nodes):
+def _decorations(case: Case, ts, nodes):
     """Lines to draw beside the body, from the scene's joints: `[(points (n_t, k, 2), (style, lw, ms))]`.
 
     A [`CrankPin`][] is drawn as the crank from its centre to the pin; a [`PointOnLine`][] as its
@@ -180,6 +192,7 @@ def _decorations(case: FlexibleRodCase, ts, nodes):
     node positions per frame, `(n_t, n_nodes, 2)`).
     """
     scene = case.scene_template
+    body = designed_body_index(case)
     items = []
     ts = jnp.asarray(ts, dtype=float)
     for joint in scene.constraints:
@@ -190,11 +203,11 @@ def _decorations(case: FlexibleRodCase, ts, nodes):
         elif isinstance(joint, PointOnLine):
             point, direction = np.asarray(joint.point), np.asarray(joint.direction)
             # The guide spans where the joint point travels, and a tenth of the body beyond.
-            along = (nodes[:, case.marker_nodes[joint.marker]] - point) @ direction if joint.body == case.body \
+            along = (nodes[:, case.marker_nodes[joint.marker]] - point) @ direction if joint.body == body \
                 else np.zeros(1)
             reach = 0.1 * case.mesh.length
             guide = np.stack([point + (along.min() - reach) * direction, point + (along.max() + reach) * direction])
             items.append((np.broadcast_to(guide, (len(ts), 2, 2)), ("k--", 0.8, 0.0)))
-            if joint.body == case.body:
+            if joint.body == body:
                 items.append((nodes[:, [case.marker_nodes[joint.marker]]], ("C0s", 0.0, 8.0)))
     return items

@@ -2,12 +2,13 @@
 
 from pathlib import Path
 
+import jax.numpy as jnp
 import numpy as np
 
-from .._case import FlexibleRodCase
+from .._case import Case
 
 
-def density_outline(case: FlexibleRodCase, x_phys, level: float = 0.5) -> list[np.ndarray]:
+def density_outline(case: Case, x_phys, level: float = 0.5) -> list[np.ndarray]:
     """The closed boundaries of the region where the physical density is at least `level`, in body coordinates.
 
     The element densities (interface columns solid) are taken as values at the element centres,
@@ -29,7 +30,13 @@ def density_outline(case: FlexibleRodCase, x_phys, level: float = 0.5) -> list[n
     if not 0.0 < level < 1.0:
         raise ValueError(f"The iso-contour level must lie in (0, 1), got {level}.")
     mesh = case.mesh
-    field = np.asarray(case.design.element_densities(np.asarray(x_phys, dtype=float))).reshape(mesh.ny, mesh.nx)
+    x_phys = np.asarray(x_phys, dtype=float)
+    if x_phys.shape != (case.n_design,) or not np.all(np.isfinite(x_phys)):
+        raise ValueError(f"The outline needs {case.n_design} finite physical densities, got shape {x_phys.shape}"
+                         f"{'' if np.all(np.isfinite(x_phys)) else ' with NaN or inf'}.")
+    # Densities below x_min (e.g. 0 for a drawn void) are drawn as given: only the 0.5 crossing matters here.
+    domain = case.design.domain
+    field = np.asarray(domain.element_densities(jnp.asarray(x_phys), case.material.x_min)).reshape(mesh.ny, mesh.nx)
     padded = np.pad(field, 1, mode="edge")
     x = np.concatenate([[0.0], (np.arange(mesh.nx) + 0.5) * mesh.dx, [mesh.length]])
     y = -0.5 * mesh.height + np.concatenate([[0.0], (np.arange(mesh.ny) + 0.5) * mesh.dy, [mesh.height]])
@@ -44,7 +51,7 @@ def density_outline(case: FlexibleRodCase, x_phys, level: float = 0.5) -> list[n
     return loops
 
 
-def write_svg(path, case: FlexibleRodCase, x_phys, *, level: float = 0.5) -> Path:
+def write_svg(path, case: Case, x_phys, *, level: float = 0.5) -> Path:
     """Write the `level` iso-contour of the physical density as an SVG path (millimetres).
 
     One `<path>` with a subpath per closed contour and `fill-rule="evenodd"` (holes stay open);
@@ -74,7 +81,7 @@ def write_svg(path, case: FlexibleRodCase, x_phys, *, level: float = 0.5) -> Pat
     return path
 
 
-def write_dxf(path, case: FlexibleRodCase, x_phys, *, level: float = 0.5) -> Path:
+def write_dxf(path, case: Case, x_phys, *, level: float = 0.5) -> Path:
     """Write the `level` iso-contour of the physical density as closed polylines of an ASCII DXF (R12, mm).
 
     One `POLYLINE` (closed, flag 70 = 1) with its `VERTEX` entities per contour, in the

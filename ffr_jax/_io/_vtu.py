@@ -5,15 +5,15 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from .._case import FlexibleRodCase
+from .._case import Case
 
 
-def write_vtu(path, case: FlexibleRodCase, x_phys, *, modes: bool = True) -> Path:
+def write_vtu(path, case: Case, x_phys, *, modes: bool = True) -> Path:
     """Write the body's mesh with its physical densities and retained mode shapes as a VTU file.
 
     Cells are the Q4 elements (VTK `quad`), points the FE nodes in body coordinates (origin at
     joint A, `z = 0`). Cell data `density`: the physical density of every element (the solid
-    interface columns at 1); `design`: 1 on design elements, 0 on the interface columns. Point
+    interface columns at 1); `design`: 1 on design elements, 0 on the passive elements (the rod's interface columns). Point
     data `mode_1 ... mode_n`: the mass-normalised hinged–hinged mode shapes `phi_k` of the design
     (3-vectors with zero `z`, ready for ParaView's *Warp By Vector*). Field data `frequencies_Hz`:
     the retained natural frequencies. Written with `meshio` (whose VTU writer has no field data:
@@ -32,11 +32,11 @@ def write_vtu(path, case: FlexibleRodCase, x_phys, *, modes: bool = True) -> Pat
     mesh, design = case.mesh, case.design
     x_phys = design.check(jax.numpy.asarray(x_phys))
     points = np.zeros((mesh.n_nodes, 3))
-    points[:, :2] = mesh.node_coordinates()
-    quads = mesh.element_dofs()[:, 0::2] // 2
+    points[:, :2] = mesh.nodes
+    quads = np.asarray(mesh.elements)
     density = np.asarray(design.element_densities(x_phys))
-    is_design = np.ones((mesh.ny, mesh.nx))
-    is_design[:, [0, -1]] = 0.0
+    is_design = np.zeros(mesh.n_elements)
+    is_design[np.asarray(design.domain.design_elements)] = 1.0
     point_data, frequencies = {}, None
     if modes:
         basis = case.modes(x_phys)
@@ -47,7 +47,7 @@ def write_vtu(path, case: FlexibleRodCase, x_phys, *, modes: bool = True) -> Pat
             point_data[f"mode_{k + 1}"] = vectors
         frequencies = np.asarray(basis.frequencies)
     meshio.write(path, meshio.Mesh(points, [("quad", quads)], point_data=point_data,
-                                   cell_data={"density": [density], "design": [is_design.ravel()]}))
+                                   cell_data={"density": [density], "design": [is_design]}))
     if frequencies is not None:
         values = " ".join(repr(float(f)) for f in frequencies)
         field = (f'<FieldData><DataArray type="Float64" Name="frequencies_Hz" NumberOfTuples="{frequencies.size}" '

@@ -7,7 +7,7 @@ import equinox as eqx
 import jax
 
 from .._typing import Design
-from ._filter import DensityFilter
+from .._design.filter import DensityFilter
 from ._objective import physical_densities
 from ._projection import HeavisideProjection
 

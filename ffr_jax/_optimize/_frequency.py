@@ -4,12 +4,10 @@ import warnings
 
 import equinox as eqx
 
-from .._case import FlexibleRodCase
-from .._fe import mass_matrix, stiffness_matrix
-from .._modes import hinged_modes
+from .._case import Case
 from .._typing import Design
 from ._constraint import AbstractDesignConstraint, pullback, status
-from ._filter import DensityFilter
+from .._design.filter import DensityFilter
 from ._projection import HeavisideProjection
 
 # Above this many degrees of freedom the dense eigen-solution of the bound check is skipped.
@@ -23,7 +21,7 @@ class FrequencyConstraint(AbstractDesignConstraint):
     basis uses (`case.frequencies`, REFERENCE_CASE §2) for the physical densities
     `x_phys = P_beta(H x)`. The constraint is `g = 1 - f_k / f_min <= 0`, with the gradient from
     the eigenvalue derivative `d lambda_k = phi_k^T (dK - lambda_k dM) phi_k` (exact for a simple
-    eigenvalue; `case.frequencies` differentiates the retained modes, `_modes.retained_eigenpairs`),
+    eigenvalue; `case.frequencies` differentiates the retained modes, `ffr_jax.retained_eigenpairs`),
     pulled back through the projection and filter.
 
     **Which bounds can be met.** The solid body is *not* the stiffest in this sense: `f_1` is the
@@ -41,7 +39,7 @@ class FrequencyConstraint(AbstractDesignConstraint):
     ([`OptimizeResult.feasible`][]).
 
     **Arguments:**
-    - `case`: the [`FlexibleRodCase`][] whose body is designed.
+    - `case`: the [`Case`][] whose (one) body is designed.
     - `minimum`: `f_min` in Hz.
     - `mode`: which frequency, `0` for the first (it must be a retained mode).
     - `filter`, `projection`: the maps from design to physical densities (as for the objective).
@@ -53,7 +51,7 @@ class FrequencyConstraint(AbstractDesignConstraint):
     ```
     """
 
-    case: FlexibleRodCase
+    case: Case
     minimum: float = eqx.field(static=True)
     mode: int = eqx.field(static=True)
     filter: DensityFilter | None
@@ -62,7 +60,7 @@ class FrequencyConstraint(AbstractDesignConstraint):
     upper_bound: float = eqx.field(static=True)
     solid: float = eqx.field(static=True)
 
-    def __init__(self, case: FlexibleRodCase, minimum: float, *, mode: int = 0, filter: DensityFilter | None = None,
+    def __init__(self, case: Case, minimum: float, *, mode: int = 0, filter: DensityFilter | None = None,
                  projection: HeavisideProjection | None = None, name: str = "frequency"):
         if not minimum > 0.0:
             raise ValueError(f"The frequency bound must be a positive number of Hz, got {minimum}.")
@@ -107,14 +105,14 @@ class FrequencyConstraint(AbstractDesignConstraint):
 
 
 @eqx.filter_jit
-def _frequencies(case: FlexibleRodCase, x):
+def _frequencies(case: Case, x):
     return case.frequencies(x)
 
 
 @eqx.filter_jit
-def _rayleigh_bound(case: FlexibleRodCase):
+def _rayleigh_bound(case: Case):
     """`f_1` of the pair `(K(1), M(x_min))`: above `f_1` of every design (see [`FrequencyConstraint`][])."""
-    design, material, mesh = case.design, case.material, case.mesh
+    design, material = case.design, case.material
     youngs = material.youngs(design.element_densities(design.initial_design(1.0)))
     densities = material.densities(design.element_densities(design.initial_design(material.x_min)))
-    return hinged_modes(stiffness_matrix(mesh, youngs), mass_matrix(mesh, densities), case.fixed_dofs, 1).frequencies[0]
+    return design.reduction(design.model, youngs, densities).frequencies[0]

@@ -3,10 +3,10 @@
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._simp import RodDesign
+from .._design.designed_body import DesignedBody
 from .._typing import Design, Scalar
 from ._constraint import AbstractDesignConstraint, pullback, status
-from ._filter import DensityFilter
+from .._design.filter import DensityFilter
 from ._projection import HeavisideProjection
 
 
@@ -15,7 +15,7 @@ class MassConstraint(AbstractDesignConstraint):
 
     The mass of the body is
 
-        m(x) = sum_e rho_e(x_e) V_e,   V_e = dx dy t,
+        m(x) = sum_e rho_e(x_e) V_e,   V_e = A_e t,
 
     over every element of the body: the design elements with their physical densities
     `x_phys = P_beta(H x)` and the solid interface columns (`x = 1`). `rho_e` is the SIMP density
@@ -30,7 +30,7 @@ class MassConstraint(AbstractDesignConstraint):
     voids), or a lower bound above the mass of the solid body.
 
     **Arguments:**
-    - `design`: the body's [`RodDesign`][] (`case.design`).
+    - `design`: the body's [`DesignedBody`][] (`case.design`).
     - `bound`: the mass bound in kg.
     - `lower`: `True` for a lower bound `m >= bound`.
     - `filter`, `projection`: the maps from design to physical densities (as for the objective).
@@ -42,14 +42,14 @@ class MassConstraint(AbstractDesignConstraint):
     ```
     """
 
-    design: RodDesign
+    design: DesignedBody
     bound: float = eqx.field(static=True)
     lower: bool = eqx.field(static=True)
     filter: DensityFilter | None
     projection: HeavisideProjection | None
     name: str = eqx.field(static=True)
 
-    def __init__(self, design: RodDesign, bound: float, *, lower: bool = False, filter: DensityFilter | None = None,
+    def __init__(self, design: DesignedBody, bound: float, *, lower: bool = False, filter: DensityFilter | None = None,
                  projection: HeavisideProjection | None = None, name: str = "mass"):
         self.design = design
         self.bound = float(bound)
@@ -94,8 +94,8 @@ class MassConstraint(AbstractDesignConstraint):
         return float(mass(d, d.initial_design(d.material.x_min))), float(mass(d, d.initial_design(1.0)))
 
 
-def body_mass(design: RodDesign, x_phys: Design) -> Scalar:
+def body_mass(design: DesignedBody, x_phys: Design) -> Scalar:
     """`m = sum_e rho_e V_e` of a body with physical densities `x_phys` `(n_design,)` (SIMP law, paper eq. 47)."""
-    mesh = design.mesh
     densities = design.material.densities(design.element_densities(x_phys))
-    return jnp.sum(densities) * (mesh.dx * mesh.dy * mesh.thickness)
+    areas = jnp.asarray(design.mesh.element_areas())  # host constants of the (static) mesh
+    return jnp.sum(densities * areas) * design.model.thickness

@@ -6,8 +6,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._typing import Design, Scalar
+from .._design.filter import DensityFilter
 from ._constraint import AbstractDesignConstraint, status
-from ._filter import DensityFilter
 from ._projection import HeavisideProjection
 
 
