@@ -58,6 +58,7 @@ from ._sensitivity._finite_differences import FiniteDifferences as FiniteDiffere
 from ._sharding import sharded_map as sharded_map
 from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state
 from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
+from ._optimize._conditions import OperatingConditions as OperatingConditions
 from ._optimize._constraint import AbstractDesignConstraint as AbstractDesignConstraint
 from ._optimize._driver import ConstraintViolationWarning as ConstraintViolationWarning, OptimizeResult as OptimizeResult, optimize as optimize
 from ._optimize._frequency import FrequencyConstraint as FrequencyConstraint

@@ -8,6 +8,7 @@ from .. import _api
 from .._case import Case
 from .._sensitivity._base import AbstractSensitivity
 from .._design.filter import DensityFilter
+from ._conditions import OperatingConditions
 from ._projection import HeavisideProjection
 
 
@@ -64,7 +65,7 @@ def filtered_objective(fun: Callable, filter: DensityFilter | None,
     return fun_of_projected_design
 
 
-def make_objective(case: Case, method: str | AbstractSensitivity = "adjoint",
+def make_objective(case: Case | OperatingConditions, method: str | AbstractSensitivity = "adjoint",
                    filter: DensityFilter | None = None, projection: HeavisideProjection | None = None,
                    **kwargs) -> Callable:
     """The objective of a case as a pure function `x -> (psi, grad psi)` for an optax loop.
@@ -75,7 +76,8 @@ def make_objective(case: Case, method: str | AbstractSensitivity = "adjoint",
     it runs under `jax.jit` (compile it once, e.g. inside [`make_step`][]) and `jax.vmap`.
 
     **Arguments:**
-    - `case`: e.g. `ffr_jax.cases.slider_crank(nx=12, ny=2, n_modes=3, t1=0.2)`.
+    - `case`: e.g. `ffr_jax.cases.slider_crank(nx=12, ny=2, n_modes=3, t1=0.2)`, or
+      [`OperatingConditions`][] (several crank speeds or loads as one batched solve).
     - `method`: sensitivity method of `ffr_jax.value_and_grad`: `"adjoint"` (default),
       `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`, or a configured method object.
     - `filter`: a [`DensityFilter`][] or `None`.
@@ -92,7 +94,11 @@ def make_objective(case: Case, method: str | AbstractSensitivity = "adjoint",
     ```
     """
     method = _api.sensitivity_method(method)  # an unknown name fails here, not at the first step
-    def fun(x):
-        return _api.value_and_grad(case, x, method, **kwargs)
+    if isinstance(case, OperatingConditions):
+        def fun(x):
+            return case.value_and_grad(x, method, **kwargs)[:2]
+    else:
+        def fun(x):
+            return _api.value_and_grad(case, x, method, **kwargs)
 
     return filtered_objective(fun, filter, projection)
