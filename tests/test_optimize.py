@@ -618,6 +618,66 @@ def test_stop_change_ends_early_and_a_resume_stops_there_too(tmp_path):
     assert again.history.steps == steps, "a resumed run that already met the rule makes no step"
 
 
+# --- designs of several bodies (a dict by body name) -----------------------------------------------
+@functools.cache
+def two_bodies():
+    """Two rods of other element sizes (a: 12 x 4 over 1 m, b: 8 x 2 over 0.5 m), a filter each, and a
+    surrogate objective of the dict design."""
+    filters = {"a": fj.DensityFilter(fj.cases.rod_body(12, 4, 2), 1.5),
+               "b": fj.DensityFilter(fj.cases.rod_body(8, 2, 2, length=0.5), 1.5)}
+    n = {k: f.areas.shape[0] for k, f in filters.items()}
+    psi_a, _ = surrogate(n["a"], 0)
+    psi_b, _ = surrogate(n["b"], 1)
+    fun = fj.filtered_objective(jax.value_and_grad(lambda x: psi_a(x["a"]) + psi_b(x["b"])), filters)
+    return filters, fun, {k: jnp.full(n[k], 0.5) for k in n}
+
+
+def area_fraction(filters, x, bodies):
+    """sum_b a_b . (H_b x_b) / sum_b sum(a_b) in NumPy, with H_b as a dense matrix."""
+    used = sum(np.asarray(filters[b].areas) @ (np.asarray(filters[b].matrix()) @ np.asarray(x[b])) for b in bodies)
+    return used / sum(float(np.sum(filters[b].areas)) for b in bodies)
+
+
+def test_mma_takes_a_design_of_two_bodies_with_a_volume_each(tmp_path):
+    filters, fun, x0 = two_bodies()
+    volumes = (fj.OnBody(fj.VolumeConstraint(0.4, filter=filters["a"]), "a"),
+               fj.OnBody(fj.VolumeConstraint(0.6, filter=filters["b"]), "b"))
+    seen = []
+    result = fj.optimize(fun, x0, fj.MMA(X_MIN, move=0.2), volumes, iterations=30, directory=tmp_path,
+                         progress=False, callback=lambda k, x, info: seen.append(type(x)))
+    assert isinstance(result.x, dict) and set(result.x) == {"a", "b"} and seen == [dict] * 30
+    assert result.history.names == ("volume_a", "volume_b") and result.feasible, result.descriptions
+    for k, (body, bound) in enumerate([("a", 0.4), ("b", 0.6)]):
+        fraction = area_fraction(filters, result.x, [body])
+        # The reported g against the fraction from the dense filter matrix: both sum the same 40 or 12
+        # products, so they agree to round-off (1e-12 leaves a factor 100).
+        np.testing.assert_allclose(result.constraints[k], fraction / bound - 1.0, atol=1e-12)
+        assert fraction <= bound * (1 + 1e-3), (body, fraction)
+    # Better than the uniform design at the two bounds (feasible: H 1 = 1).
+    uniform = {"a": jnp.full(x0["a"].shape, 0.4), "b": jnp.full(x0["b"].shape, 0.6)}
+    assert result.history.value[-1] < float(fun(uniform)[0])
+    assert result.descriptions[0].startswith("a: volume fraction")
+    stored = fj.load_checkpoint(tmp_path / "checkpoint.npz")
+    np.testing.assert_array_equal(stored.x, np.concatenate([result.x["a"], result.x["b"]]),
+                                  err_msg="the checkpoint holds the flat design, bodies in sorted name order")
+
+
+def test_a_volume_shared_by_two_bodies_is_their_area_fraction():
+    filters, fun, x0 = two_bodies()
+    shared = fj.VolumeConstraint(0.45, filter=filters)
+    rng = np.random.default_rng(7)
+    x = {k: jnp.asarray(rng.uniform(0.05, 1.0, v.shape)) for k, v in x0.items()}
+    # The elements of b are half as long as a's, so an unweighted mean would differ by percents.
+    np.testing.assert_allclose(shared.fraction(x), area_fraction(filters, x, ["a", "b"]), rtol=1e-13)
+    result = fj.optimize(fun, x0, fj.MMA(X_MIN, move=0.2), shared, iterations=30, progress=False)
+    assert result.feasible, result.descriptions
+    assert area_fraction(filters, result.x, ["a", "b"]) <= 0.45 * (1 + 1e-3)
+    with pytest.raises(ValueError, match="dict"):
+        shared.fraction(x["a"])
+    with pytest.raises(ValueError, match="MMA"):
+        fj.optimize(fun, x0, optax.adam(0.05), fj.VolumeConstraint(0.45, filter=filters), iterations=1, progress=False)
+
+
 def test_optax_optimizers_refuse_other_constraints():
     design = small_design()
     _, value_and_grad = surrogate(design.n_design)

@@ -10,12 +10,15 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
 import numpy as np
 import optax
 
 from ._checkpoint import Checkpoint, CheckpointError, load_checkpoint, restore_opt_state, save_checkpoint
 from ._history import History
 from ._progress import Progress
+from ._constraint import AbstractDesignConstraint
+from ._pytree import Raveled, is_flat, raveled_objective
 from ._step import as_optimizer, evaluate_constraints, make_step
 
 CHECKPOINT = "checkpoint.npz"
@@ -68,7 +71,11 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
 
     **Arguments:**
     - `fun`: `x -> (value, grad)` ([`make_objective`][] or any other).
-    - `x0`: `(n_design,)` start design.
+    - `x0`: `(n_design,)` start design, or a dict `{body name: (n_b,)}` (a [`DesignMap`][]'s
+      design of several bodies): flattened for the loop (`jax.flatten_util.ravel_pytree`, bodies
+      in sorted name order; the checkpoint stores the flat vector, `callback` gets the dict), `fun` and the constraints are given the dict, and the result's `x` is a dict.
+      Needs [`MMA`][]; a constraint on one body is [`OnBody`][], a volume shared by the bodies a
+      [`VolumeConstraint`][] with a dict of filters.
     - `optimizer`: an `optax.GradientTransformation` (Adam, [`optimality_criteria`][]) or [`MMA`][].
     - `constraints`: for an optax optimizer the [`VolumeConstraint`][] it projects onto; for MMA
       one constraint or a sequence ([`VolumeConstraint`][], [`MassConstraint`][],
@@ -103,6 +110,21 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
         raise ValueError("resume=True needs the directory of the run to resume.")
     config = json.loads(json.dumps(config or {}, sort_keys=True))
     beta_of = _beta_schedule(beta)
+    unravel = None
+    if not is_flat(x0):  # a design of several bodies: one flat vector inside the loop
+        x0, unravel = ravel_pytree(jax.tree.map(lambda a: jnp.asarray(a, dtype=jnp.float64), x0))
+        fun = raveled_objective(fun, unravel)
+        if isinstance(constraints, AbstractDesignConstraint):
+            constraints = (constraints,)
+        constraints = tuple(Raveled(c, unravel) for c in (constraints or ()))
+        if isinstance(optimizer, optax.GradientTransformation):
+            raise ValueError("A design of several bodies (a dict) needs fj.MMA(): the volume projection of Adam "
+                             "and OC holds the volume of one design vector.")
+        if callback is not None:
+            user_callback = callback
+
+            def callback(k, x, info):
+                user_callback(k, unravel(x), info)
     optimizer, constraints = as_optimizer(optimizer, constraints)
     names = _unique_names(constraints)
 
@@ -159,8 +181,9 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
         if log is not None:
             log.close()
         bar.close()
-    return _finish(x, opt_state, history, constraints, names, beta_of(max(history.steps - 1, 0)),
-                   feasibility_tolerance)
+    result = _finish(x, opt_state, history, constraints, names, beta_of(max(history.steps - 1, 0)),
+                     feasibility_tolerance)
+    return result if unravel is None else result._replace(x=unravel(result.x))
 
 
 def _finish(x, opt_state, history, constraints, names, beta, tolerance) -> OptimizeResult:

@@ -12,24 +12,32 @@ from ._conditions import OperatingConditions
 from ._projection import HeavisideProjection
 
 
-def physical_densities(x, filter: DensityFilter | None, projection: HeavisideProjection | None, beta=None):
+def physical_densities(x, filter: DensityFilter | dict[str, DensityFilter] | None,
+                       projection: HeavisideProjection | None, beta=None):
     """The physical densities of a design: `P_beta(H x)`, `H x`, `P_beta(x)` or `x` (whichever map is given).
 
     **Arguments:**
-    - `x`: `(n_design,)` design; `filter`: a [`DensityFilter`][] or `None`;
+    - `x`: `(n_design,)` design (or a dict by body); `filter`: a [`DensityFilter`][], a dict of
+      them by body (for a dict design), or `None`;
       `projection`: a [`HeavisideProjection`][] or `None`; `beta`: its sharpness (needed with a projection).
 
     **Returns:** `(n_design,)` physical densities.
     """
-    x_filtered = x if filter is None else filter(x)
+    if isinstance(filter, dict):  # a design of several bodies, one filter each
+        if not isinstance(x, dict) or set(x) != set(filter):
+            raise ValueError(f"The filters are given for the bodies {sorted(filter)}: pass the design as a dict with "
+                             f"these keys, got {sorted(x) if isinstance(x, dict) else type(x).__name__}.")
+        x_filtered = {name: filter[name](x[name]) for name in x}
+    else:
+        x_filtered = x if filter is None else filter(x)
     if projection is None:
         return x_filtered
     if beta is None:
         raise ValueError("A Heaviside projection needs its sharpness: pass beta (e.g. from fj.beta_continuation).")
-    return projection(x_filtered, beta)
+    return jax.tree.map(lambda u: projection(u, beta), x_filtered)
 
 
-def filtered_objective(fun: Callable, filter: DensityFilter | None,
+def filtered_objective(fun: Callable, filter: DensityFilter | dict[str, DensityFilter] | None,
                        projection: HeavisideProjection | None = None) -> Callable:
     """An objective of the design through a density filter (and projection), with its gradient pulled back.
 
@@ -52,6 +60,10 @@ def filtered_objective(fun: Callable, filter: DensityFilter | None,
             return fun
 
         def fun_of_design(x):
+            if isinstance(filter, dict):  # one filter per body of a dict design
+                x_phys, pullback = jax.vjp(lambda x: physical_densities(x, filter, None), x)
+                value, grad = fun(x_phys)
+                return value, pullback(grad)[0]
             value, grad = fun(filter(x))
             return value, filter.transpose(grad)
 
@@ -66,8 +78,8 @@ def filtered_objective(fun: Callable, filter: DensityFilter | None,
 
 
 def make_objective(case: Case | OperatingConditions, method: str | AbstractSensitivity = "adjoint",
-                   filter: DensityFilter | None = None, projection: HeavisideProjection | None = None,
-                   **kwargs) -> Callable:
+                   filter: DensityFilter | dict[str, DensityFilter] | None = None,
+                   projection: HeavisideProjection | None = None, **kwargs) -> Callable:
     """The objective of a case as a pure function `x -> (psi, grad psi)` for an optax loop.
 
     `psi` is the case's integral objective (REFERENCE_CASE §4) of the physical densities
@@ -80,7 +92,7 @@ def make_objective(case: Case | OperatingConditions, method: str | AbstractSensi
       [`OperatingConditions`][] (several crank speeds or loads as one batched solve).
     - `method`: sensitivity method of `ffr_jax.value_and_grad`: `"adjoint"` (default),
       `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`, or a configured method object.
-    - `filter`: a [`DensityFilter`][] or `None`.
+    - `filter`: a [`DensityFilter`][], a dict of them by body (for a dict design), or `None`.
     - `projection`: a [`HeavisideProjection`][] after the filter, or `None`; with one the
       function is `fun(x, beta)`, `x_phys = P_beta(H x)`.
     - `**kwargs`: passed on to `ffr_jax.value_and_grad`, e.g. `rtol=1e-8, atol=1e-10`.

@@ -11,6 +11,7 @@ from jaxtyping import Array, Float
 
 from ._constraint import AbstractDesignConstraint
 from ._optimizer import AbstractOptimizer, ProjectedOptax
+from ._pytree import OnBody, Raveled
 from ._volume import VolumeConstraint
 
 
@@ -67,11 +68,19 @@ def as_optimizer(optimizer, constraints) -> tuple[AbstractOptimizer, tuple[Abstr
                      "(e.g. optax.adam(0.02), fj.optimality_criteria(volume)) or fj.MMA().")
 
 
-def volume_of(optimizer: AbstractOptimizer, constraints: Sequence[AbstractDesignConstraint]) -> VolumeConstraint | None:
-    """The run's volume constraint (the projection's, or the first among the inequalities), if any."""
+def volume_of(optimizer: AbstractOptimizer,
+              constraints: Sequence[AbstractDesignConstraint]) -> AbstractDesignConstraint | None:
+    """The run's volume constraint (the projection's, or the first among the inequalities, also one of a
+    body or of a dict design: it has `fraction`), if any."""
     if isinstance(optimizer, ProjectedOptax):
         return optimizer.volume
-    return next((c for c in constraints if isinstance(c, VolumeConstraint)), None)
+    return next((c for c in constraints if _is_volume(c)), None)
+
+
+def _is_volume(constraint) -> bool:
+    while isinstance(constraint, (Raveled, OnBody)):
+        constraint = constraint.constraint
+    return isinstance(constraint, VolumeConstraint)
 
 
 def evaluate_constraints(constraints: Sequence[AbstractDesignConstraint], x, beta):
