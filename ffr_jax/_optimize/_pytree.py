@@ -7,10 +7,9 @@ of such a design is [`OnBody`][]; a constraint on all of them takes the dict its
 [`VolumeConstraint`][] with one filter per body: the volume shared by the bodies).
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
@@ -18,8 +17,8 @@ from ._constraint import AbstractDesignConstraint
 
 
 def is_flat(x) -> bool:
-    """Whether a design is one array (not a dict or another pytree of several)."""
-    return isinstance(x, (jax.Array, jnp.ndarray)) or hasattr(x, "__array__")
+    """Whether a design is one vector (anything but a dict by body: an array, a list of numbers)."""
+    return not isinstance(x, Mapping)
 
 
 class OnBody(AbstractDesignConstraint):
