@@ -290,7 +290,7 @@ _SHARDED_SCRIPT = textwrap.dedent(
 
         one = jax.jit(f)
         sharded = ffr_jax.sharded_map(f)
-        for batch in (4, 3):  # 3: padded to a multiple of the device count
+        for batch in (3,):  # padded to a multiple of the device count, then split over both devices
             xs = jnp.asarray(rng.uniform(0.2, 0.95, (batch, case.n_design)))
             out = sharded(xs)
             assert all(o.shape[0] == batch for o in out)
