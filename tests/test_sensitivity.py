@@ -66,11 +66,10 @@ def _radius(scene):
 
 
 def _with_radius(case, radius):
-    """The case with another crank radius: the crank pin of the scene and the rod's initial point A
-    (`R_x(0) = radius` keeps the initial state consistent); the same structure, so the compiled
-    programs of the family run it."""
-    case = eqx.tree_at(lambda c: _radius(c.scene_template), case, jnp.asarray(radius))
-    return eqx.tree_at(lambda c: c.y_r0, case, case.y_r0.at[0].set(radius))
+    """The case with another crank radius (the crank pin of the problem's scene): the problem makes
+    its initial state consistent with it (the rod's point A starts at the pin); the same structure,
+    so the compiled programs of the family run it."""
+    return eqx.tree_at(lambda c: _radius(c.problem.scene), case, jnp.asarray(radius))
 
 
 @pytest.fixture(scope="module")
