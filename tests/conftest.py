@@ -39,7 +39,7 @@ if _cache:
 # programs (`helpers.adjoint_value_and_grad`, `helpers.tight_objective`) form one group; every other
 # module is its own group. Groups are handed out longest first (measured cold-cache time on two
 # cores, largest first), which keeps the two workers evenly loaded; new modules go last.
-_SHARED_PROGRAMS = ("test_sensitivity", "test_hard_cases", "test_adjoint_quadrature")
+_SHARED_PROGRAMS = ("test_sensitivity", "test_hard_cases", "test_adjoint_quadrature", "test_cacheable")
 _LONGEST_FIRST = ("family", "test_notebooks", "test_dynamics", "test_optimize", "test_sparse",
                   "test_simulation_errors", "test_effects", "test_modes", "test_bad_input", "test_body_data",
                   "test_fe")
