@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._body_data import BodyData, flexible_body_data
+from ._checks import integer
 from ._fe import RodMesh, mass_matrix, stiffness_matrix
 from ._geometric_stiffness import centrifugal_geometric_stiffness
 from ._modes import ModalBasis, hinged_modes
@@ -21,7 +22,7 @@ from ._scene._stiffening import GeometricStiffening
 from ._simp import SIMP, RodDesign
 from ._sparse_fe import resolve_fe_path, sparse_mass_matrix, sparse_stiffness_matrix
 from ._sparse_modes import sparse_hinged_modes
-from ._typing import Design
+from ._typing import Design, DesignInput
 
 
 class AbstractDesignMap(eqx.Module):
@@ -37,7 +38,7 @@ class AbstractDesignMap(eqx.Module):
         """A uniform design."""
 
     @abc.abstractmethod
-    def check(self, x: Design) -> Design:
+    def check(self, x: DesignInput) -> Design:
         """Validate a design (shape at trace time, values at run time) and return it as float64."""
 
     @abc.abstractmethod
@@ -63,6 +64,8 @@ class RodDesignMap(AbstractDesignMap):
     fe_path: str = eqx.field(static=True, default="auto")
 
     def __check_init__(self):
+        integer(self.n_modes, "RodDesignMap(n_modes=...)", 1, "It is the number of retained modes (REFERENCE_CASE: 6).")
+        integer(self.body, "RodDesignMap(body=...)", 0)
         resolve_fe_path(self.fe_path, self.design.mesh)
 
     @property
@@ -81,7 +84,7 @@ class RodDesignMap(AbstractDesignMap):
         """A uniform design `x_e = value`, flat in the REFERENCE_CASE §1 order."""
         return self.design.initial_design(value)
 
-    def check(self, x: Design) -> Design:
+    def check(self, x: DesignInput) -> Design:
         return self.design.check(x)
 
     @property
@@ -197,7 +200,7 @@ class Case(eqx.Module):
         """A uniform design `x_e = value` (flat, in design order)."""
         return self.design_map.initial_design(value)
 
-    def check(self, x: Design) -> Design:
+    def check(self, x: DesignInput) -> Design:
         return self.design_map.check(x)
 
     @property

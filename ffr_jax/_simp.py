@@ -4,6 +4,9 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import design_array, design_values, is_traced
+from ._design.material import check_parameters
+from ._errors import DesignError, error_if
 from ._fe import RodMesh
 from ._typing import Design, ElementField
 
@@ -23,6 +26,9 @@ class SIMP(eqx.Module):
     mass_factor: float = eqx.field(static=True, default=1e5)
     x_switch: float = eqx.field(static=True, default=0.1)
     x_min: float = eqx.field(static=True, default=0.01)
+
+    def __check_init__(self):
+        check_parameters(self)
 
     def youngs(self, x: ElementField) -> ElementField:
         """Element Young's moduli `E_e = x_e^p E0`."""
@@ -51,29 +57,36 @@ class RodDesign(eqx.Module):
 
     def initial_design(self, value: float = 0.5) -> Design:
         """A uniform design `x_e = value` (flat, in design order)."""
-        if not self.material.x_min <= value <= 1.0:
+        if not self.material.x_min <= float(value) <= 1.0:
             raise ValueError(f"Design value {value} lies outside [x_min, 1] = [{self.material.x_min}, 1].")
         return jnp.full((self.n_design,), float(value))
 
-    def check(self, x: Design) -> Design:
-        """Validate a design: shape at trace time, NaN and bounds at run time (`eqx.error_if`)."""
-        x = jnp.asarray(x)
+    def check(self, x) -> Design:
+        """Validate a design and return it as float64: dtype and shape at trace time, values (NaN,
+        inf, bounds `[x_min, 1]`) at once when `x` is concrete, else at run time (`error_if`).
+
+        Raises [`DesignError`][] (a `ValueError`): complex numbers are refused, integers and float32
+        are converted to float64 (so that the gradient is float64 too).
+        """
+        x = design_array(x)
         if x.shape != (self.n_design,):
-            raise ValueError(
+            raise DesignError(
                 f"Design vector has shape {x.shape}, expected ({self.n_design},) = ny * (nx - 2) for the "
                 f"{self.mesh.nx} x {self.mesh.ny} mesh (interface columns carry no design variable). "
                 "Use case.initial_design(value) for a valid vector."
             )
-        if not jnp.issubdtype(x.dtype, jnp.floating):
-            x = x.astype(float)
-        x = eqx.error_if(x, jnp.any(jnp.isnan(x)), "Design vector contains NaN.")
         lo, hi = self.material.x_min, 1.0
-        x = eqx.error_if(
+        if not is_traced(x):
+            design_values(x, lo)
+            return x
+        x = error_if(x, ~jnp.all(jnp.isfinite(x)), "Design vector contains NaN or inf; every density must be a "
+                     f"finite number in [x_min, 1] = [{lo}, 1].", DesignError)
+        return error_if(
             x,
             jnp.any((x < lo) | (x > hi)),
             f"Design densities must lie in [x_min, 1] = [{lo}, {hi}]; clip or project the design first.",
+            DesignError,
         )
-        return x
 
     def element_densities(self, x: Design) -> ElementField:
         """Full element field `(n_elements,)` in flat element order `j nx + i`, interfaces solid."""

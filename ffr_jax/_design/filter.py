@@ -44,12 +44,13 @@ class DensityFilter(eqx.Module):
     weights: Float[Array, "n_design n_neighbours"]
 
     def __init__(self, domain: DesignDomain, radius: float, scale=None):
-        if not radius >= 0.0:
-            raise ValueError(f"The filter radius must be non-negative, got {radius}; radius=0 means no filtering.")
+        if not (radius >= 0.0 and np.isfinite(radius)):
+            raise ValueError(f"The filter radius must be a finite non-negative length, got {radius}; radius=0 means "
+                             "no filtering.")
         centres = domain.design_centroids()
         if scale is not None:
             scale = np.asarray(scale, dtype=float)
-            if scale.shape != (2,) or not np.all(scale > 0):
+            if scale.shape != (2,) or not np.all((scale > 0) & np.isfinite(scale)):
                 raise ValueError(f"scale must be two positive lengths (sx, sy), got {scale}.")
             centres = centres / scale
         areas = domain.design_areas()

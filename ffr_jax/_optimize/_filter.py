@@ -48,9 +48,9 @@ class DensityFilter(eqx.Module):
     weights: Float[Array, "n_design n_neighbours"]
 
     def __init__(self, design: RodDesign, radius: float):
-        if not radius >= 0.0:
+        if not (radius >= 0.0 and np.isfinite(radius)):
             raise ValueError(
-                f"The filter radius must be a non-negative number of element sizes, got {radius}; "
+                f"The filter radius must be a finite non-negative number of element sizes, got {radius}; "
                 "use radius=0 for no filtering (or 1.5 for the 8 nearest neighbours)."
             )
         mesh = design.mesh

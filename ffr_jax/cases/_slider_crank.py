@@ -6,6 +6,7 @@ import numpy as np
 
 from .._body_data import flexible_body_data
 from .._case import Case, RodDesignMap
+from .._checks import integer, number, positive
 from .._fe import RodMesh, mass_matrix, stiffness_matrix
 from .._modes import hinged_modes
 from .._objective._compliance import Compliance
@@ -92,13 +93,22 @@ def slider_crank(
     **Returns:** a [`Case`][]: the [`Problem`][] with the rod's compliance as objective and a
     [`RodDesignMap`][] of the rod.
     """
-    if not 0 < eccentricity < length:
+    # Every number is checked before anything is computed (the rod's modes compile first).
+    for name, value in (("nx", nx), ("ny", ny), ("n_modes", n_modes)):
+        integer(value, f"slider_crank({name}=...)", 1)
+    t1 = positive(t1, "slider_crank(t1=...)", "It is the end time in s.")
+    length = positive(length, "slider_crank(length=...)")
+    positive(height, "slider_crank(height=...)")
+    positive(thickness, "slider_crank(thickness=...)")
+    t_ramp = positive(t_ramp, "slider_crank(t_ramp=...)", "It is the run-up time of the crank in s.")
+    speed = number(speed, "slider_crank(speed=...)")
+    if not (isinstance(eccentricity, (int, float, np.floating, np.integer)) and 0 < eccentricity < length):
         raise ValueError(
             f"The crank eccentricity must lie in (0, l) = (0, {length}) for the slider–crank to assemble "
             f"at every crank angle, got {eccentricity}."
         )
-    if t1 <= 0:
-        raise ValueError(f"t1 must be positive, got {t1}.")
+    if not isinstance(material, SIMP):
+        raise ValueError(f"material must be an ffr_jax.SIMP, got {type(material).__name__}.")
     mesh = RodMesh(nx, ny, length, height, thickness)
     design = RodDesign(mesh, material)
     rod = Body("rod", rod_template(design, n_modes, fe_path=fe_path))
