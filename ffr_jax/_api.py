@@ -74,10 +74,21 @@ def _check_options(where: str, rtol, atol, max_steps) -> None:
 
 
 def _design(case: Case, x, where: str):
-    """The design of a case: checked now where it is concrete (the program checks it again at run time)."""
+    """The design of a case, checked before the simulation is traced where its values are known.
+
+    A concrete design is checked on the host at once. A traced one goes through a small compiled
+    check first: under `jax.vmap` its values are known, so a bad batch fails there without
+    compiling the simulation; under a user's `jax.jit` the check becomes part of the program.
+    The simulation program checks the design again (it may be called on its own).
+    """
     if x is None:
         raise ValueError(f"{where}(case, x): a case needs its design x (e.g. case.initial_design(0.5)).")
-    return x if _checks.is_traced(x) else case.check(x)
+    return _checked_design(case, x) if _checks.is_traced(x) else case.check(x)
+
+
+@eqx.filter_jit
+def _checked_design(case, x):
+    return case.check(x)
 
 
 # --- compiled programs ------------------------------------------------------------------------

@@ -137,7 +137,7 @@ def design_values(x, x_min: float) -> None:
 
 
 def _entries(index: np.ndarray, values: np.ndarray) -> str:
-    shown = ", ".join(f"x[{i}] = {values[i]:g}" for i in index[:3])
+    shown = ", ".join(f"x[{i}] = {float(values[i])!r}" for i in index[:3])
     more = f" and {index.size - 3} more" if index.size > 3 else ""
     return f"{'entry' if index.size == 1 else 'entries'} {shown}{more}"
 
