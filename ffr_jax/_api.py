@@ -28,7 +28,7 @@ from ._sensitivity._base import AbstractSensitivity
 from ._sensitivity._direct import Direct
 from ._sensitivity._finite_differences import FiniteDifferences
 from ._simulate import Trajectory, simulate as simulate_redundant, solve_minimal
-from ._typing import DesignInput
+from ._typing import DesignsInput
 
 
 METHODS = {
@@ -98,7 +98,7 @@ def _simulate_problem(problem, solver, rtol, atol, ts, dense, max_steps, adjoint
     return solve_minimal(
         problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
         integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol, ts=ts, dense=dense,
-        max_steps=max_steps, adjoint=adjoint, jump_ts=problem.jump_ts, dt0=dt0,
+        max_steps=max_steps, adjoint=adjoint, jump_ts=problem.jump_ts, dt0=problem.dt0 if dt0 is None else dt0,
     )
 
 
@@ -158,7 +158,7 @@ def simulate(target, *args, solver: diffrax.AbstractSolver | None = None, rtol: 
 
 
 @clean_errors
-def simulate_case(case: Case, x: DesignInput, *, rtol: float = 1e-10, atol: float = 1e-12,
+def simulate_case(case: Case, x: DesignsInput, *, rtol: float = 1e-10, atol: float = 1e-12,
                   solver: diffrax.AbstractSolver | None = None, ts=None, dense: bool = False,
                   max_steps: int = 1_000_000, adjoint: diffrax.AbstractAdjoint | None = None) -> Trajectory:
     """Simulate a case for design `x` with its objective integrated along (`simulate(case, x)`)."""
@@ -167,7 +167,7 @@ def simulate_case(case: Case, x: DesignInput, *, rtol: float = 1e-10, atol: floa
 
 
 @clean_errors
-def objective(target, x: DesignInput | None = None, *, rtol: float = 1e-10, atol: float = 1e-12,
+def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, atol: float = 1e-12,
               solver: diffrax.AbstractSolver | None = None, max_steps: int = 1_000_000):
     """`psi = G(t1) + int_{t0}^{t1} F dt` of a problem, or of a case at design `x`
     (REFERENCE_CASE §4: the integral compliance of the rod).
@@ -191,14 +191,15 @@ def objective(target, x: DesignInput | None = None, *, rtol: float = 1e-10, atol
 
 
 @clean_errors
-def value_and_grad(target, x: DesignInput | None = None, method: str | AbstractSensitivity = "adjoint", *,
+def value_and_grad(target, x: DesignsInput | None = None, method: str | AbstractSensitivity = "adjoint", *,
                    rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
                    max_steps: int = 200_000):
     """`(psi, grad psi)` of a case with respect to its design, or of a problem with respect to its arrays.
 
     **Arguments:**
-    - `target`: a case such as `ffr_jax.cases.slider_crank()` followed by `x`, its `(n_design,)`
-      densities in `[x_min, 1]`; or a [`Problem`][] (no `x`).
+    - `target`: a case such as `ffr_jax.cases.slider_crank()` followed by `x`, its designs: a
+      dict `{body name: (n_design_b,) densities}` in `[x_min, 1]`, or a flat `(n_design,)` array
+      when the case designs one body; or a [`Problem`][] (no `x`).
     - `method`: `"adjoint"` (the paper's adjoint variable method, default), `"autodiff"`
       (`jax.grad` through diffrax), `"backsolve"` (diffrax `BacksolveAdjoint`), `"direct"`
       (forward sensitivities), `"fd"` (central differences, designs only), or a configured method
@@ -211,7 +212,8 @@ def value_and_grad(target, x: DesignInput | None = None, method: str | AbstractS
       case needs about 8,000 forward and 13,000 backward steps), so the default is 200,000 rather
       than the 1,000,000 of [`objective`][]: raise it for long horizons or low-order solvers.
 
-    **Returns:** `(psi, grad)`: for a case, `grad` is an array shaped like `x`; for a problem, a
+    **Returns:** `(psi, grad)`: for a case, `grad` has the structure of `x` (a dict of arrays for a
+    dict design, one forward and one backward solve for all bodies); for a problem, a
     pytree like the problem (`grad.scene` the derivatives with respect to every array of the
     scene, `grad.objective` those of the objective's arrays, `grad.y0`, `grad.z0` those of the
     initial state; `None` where a leaf is not a float array). Compiled on the first call and

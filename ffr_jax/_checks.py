@@ -107,31 +107,33 @@ def max_steps(value, where: str) -> int:
                    "200,000 for gradients); raise it for long horizons.")
 
 
-def design_array(x) -> jnp.ndarray:
-    """`x` as a float64 array: integers and float32 are converted, complex numbers are refused."""
+def design_array(x, of_body: str = "") -> jnp.ndarray:
+    """`x` as a float64 array: integers and float32 are converted, complex numbers are refused.
+
+    `of_body` (e.g. `" for body 'rod'"`) names the body in the messages."""
     if is_traced(x):
         dtype = x.dtype
     else:
         x = np.asarray(x) if not isinstance(x, jax.Array) else x
         dtype = x.dtype
     if jnp.issubdtype(dtype, jnp.complexfloating):
-        raise DesignError(f"The design vector is complex ({dtype}); densities are real numbers in [x_min, 1]. "
+        raise DesignError(f"The design vector{of_body} is complex ({dtype}); densities are real numbers in [x_min, 1]. "
                           "Pass x.real if the imaginary part is meant to be zero.")
     if not (jnp.issubdtype(dtype, jnp.floating) or jnp.issubdtype(dtype, jnp.integer) or dtype == jnp.bool_):
-        raise DesignError(f"The design vector must hold real numbers, got dtype {dtype}.")
+        raise DesignError(f"The design vector{of_body} must hold real numbers, got dtype {dtype}.")
     return jnp.asarray(x, dtype=jnp.float64)
 
 
-def design_values(x, x_min: float) -> None:
+def design_values(x, x_min: float, of_body: str = "") -> None:
     """Concrete design values: finite and inside `[x_min, 1]`, or a [`DesignError`][] naming the entries."""
     values = np.asarray(x)
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
-        raise DesignError(f"Design vector contains NaN or inf at {_entries(bad, values)}; every density must be "
+        raise DesignError(f"Design vector contains NaN or inf{of_body} at {_entries(bad, values)}; every density must be "
                           f"a finite number in [x_min, 1] = [{x_min}, 1].")
     bad = np.flatnonzero((values < x_min) | (values > 1.0))
     if bad.size:
-        raise DesignError(f"Design densities must lie in [x_min, 1] = [{x_min}, 1]; {_entries(bad, values)} "
+        raise DesignError(f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; {_entries(bad, values)} "
                           f"{'is' if bad.size == 1 else 'are'} outside. Clip or project the design first "
                           f"(e.g. jnp.clip(x, {x_min}, 1)).")
 

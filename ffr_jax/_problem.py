@@ -29,7 +29,8 @@ class Problem(eqx.Module):
     - `objective`: the [`Objective`][] (integrand `F` and/or terminal term `G`).
     - `y0`, `z0`: `(f,)` independent initial positions and velocities.
     - `t0`, `t1`: the time span (static); `jump_ts`: times where the scene's laws switch pieces
-      (static; the step-size controller lands on them).
+      (static; the step-size controller lands on them); `dt0`: the first step of every solve
+      (static; `None`: diffrax's choice).
     """
 
     scene: Scene
@@ -40,10 +41,11 @@ class Problem(eqx.Module):
     t0: float = eqx.field(static=True)
     t1: float = eqx.field(static=True)
     jump_ts: tuple[float, ...] = eqx.field(static=True)
+    dt0: float | None = eqx.field(static=True)
 
     def __init__(self, scene: Scene, t1: float, *, positions, velocities=None, objective, t0: float = 0.0,
                  jump_ts: tuple[float, ...] | None = None, partition: Partition | None = None,
-                 dependent_guess=None, check_terminal: bool = True):
+                 dependent_guess=None, check_terminal: bool = True, dt0: float | None = None):
         """**Arguments:**
         - `scene`: the mechanism ([`Scene`][]: bodies, joints, drivers, forces).
         - `t1`: end time; `t0`: start time (default 0).
@@ -66,6 +68,11 @@ class Problem(eqx.Module):
           constraints fix (at the initial state its derivative is nonzero only on coordinates
           whose rows of `dy_r/dy` and `dz_r/dz` vanish, such as a driven crank's pin): the motion
           cannot change such a term, which is almost always a mistake in the objective.
+        - `dt0`: the first step size of every solve of the problem, forward and backward
+          (default `None`: diffrax's, which is 0.01 s for the solves here). An explicit solver's
+          first trial step must not be far outside its stability region: with elastic modes of
+          several kHz (a stiff part), give about `1 / (10 omega_max)`; a trial stage far outside it
+          can move the elastic coordinates so far that the position constraints have no solution.
         """
         t0, t1 = _time(t0, "t0"), _time(t1, "t1")
         if not t1 > t0:
@@ -107,6 +114,9 @@ class Problem(eqx.Module):
         if jump_ts is None:
             jump_ts = scene.breakpoints
         self.jump_ts = tuple(float(j) for j in jump_ts if t0 < j < t1)
+        if dt0 is not None and not 0.0 < float(dt0) < t1 - t0:
+            raise ValueError(f"dt0 must lie in (0, t1 - t0) = (0, {t1 - t0}), got {dt0}.")
+        self.dt0 = None if dt0 is None else float(dt0)
         _check_objective(self, y_r0, check_terminal)
 
     @property

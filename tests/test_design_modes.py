@@ -323,6 +323,19 @@ def test_dense_rule_at_coincident_retained_eigenvalues(spectrum):
     np.testing.assert_allclose(reverse, forward, rtol=1e-12, err_msg="reverse vs forward mode")
 
 
+def test_subspace_derivative_gauge():
+    """The documented gauge of `retained_eigenpairs`: `Phi^T M dPhi` is symmetric, hence `= -1/2 Phi^T dM Phi`
+    (the rod's interior pencil along a random design direction; exact arithmetic up to round-off)."""
+    body = _rod_body(fd.DenseModes(), nx=12, ny=2, n_modes=4)
+    x = _design(body, 5)
+    v = _unit(body.n_design, 500)
+    (k, m), (dk, dm) = jax.jvp(lambda x: tuple(a.todense() for a in body.matrices(x)), (x,), (v,))
+    interior = body.reduction.layout(body.mesh).interior
+    ix = np.ix_(interior, interior)
+    (_, phi), (_, dphi) = jax.jvp(lambda a, b: fd.retained_eigenpairs(a, b, 4), (k[ix], m[ix]), (dk[ix], dm[ix]))
+    assert_close_relative(phi.T @ m[ix] @ dphi, -0.5 * phi.T @ dm[ix] @ phi, 1e-10, "Phi^T M dPhi = -1/2 Phi^T dM Phi")
+
+
 # --- bad input -----------------------------------------------------------------------------------
 
 

@@ -134,6 +134,8 @@ class ElementOperator(eqx.Module):
         if v.ndim not in (1, 2) or v.shape[0] != self.model.n_dof:
             raise ValueError(f"ElementOperator of shape {self.shape} cannot multiply an array of shape {v.shape}.")
         k = 1 if v.ndim == 1 else v.shape[1]
+        if k == 0:  # no columns (a rigid body's empty basis)
+            return jnp.zeros(v.shape, jnp.result_type(self.values, v))
         local = element_vectors(self.model, v)
         local = self.values[:, None, None] * jnp.einsum("eab,ebk->eak", self.model.unit_matrices(self.kind), local)
         return scatter(self.model, local, k).reshape(v.shape)

@@ -20,7 +20,7 @@ the nodal translation vectors and `c` the stacked node coordinates:
 | `marker_positions` | `c_P`            | `(n_markers, 2)` undeformed joint points  |
 | `marker_modes`| `Phi(c_P)`            | `(n_markers, 2, n_q)` shape-function rows |
 
-These are the definitions of `ffr_jax._body_data`; none assumes `Phi^T M Phi = I`, so the basis
+These are the fields of `BodyData` (`ffr_jax._scene._body_data`); none assumes `Phi^T M Phi = I`, so the basis
 may hold static (interface) modes. A marker is a node, or a set of nodes standing for the point
 at their centroid: `c_P` is the mean of their positions and `Phi(c_P)` the mean of their
 displacement rows — for a rigid interface (pin in a bushing) exactly the translation of the
@@ -30,7 +30,7 @@ centroid, otherwise the least-squares rigid-motion fit of the rim at its centroi
 import jax.numpy as jnp
 import numpy as np
 
-from .._body_data import BodyData
+from .._scene._body_data import BodyData
 from .assembly import FEModel
 from .mesh import QuadMesh
 

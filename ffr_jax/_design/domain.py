@@ -7,7 +7,7 @@ from jaxtyping import Array, Float, Int
 
 from .._checks import design_array, design_values, is_traced
 from .._errors import DesignError, error_if
-from .mesh import QuadMesh, _format_ids
+from .mesh import QuadMesh, StructuredGrid, _format_ids
 
 DESIGN, SOLID, VOID = 0, 1, 2
 _ROLE_NAMES = {DESIGN: "design", SOLID: "passive solid", VOID: "passive void"}
@@ -79,29 +79,54 @@ class DesignDomain(eqx.Module):
         """Areas `(n_design,)` of the design elements (volume weights), in design order."""
         return self.mesh.element_areas()[np.asarray(self.design_elements)]
 
+    def design_grid(self, values) -> np.ndarray:
+        """A design-ordered vector `(n_design,)` as the rectangular block of grid elements it covers.
+
+        Needs a [`StructuredGrid`][] whose design elements fill whole rows and columns of a
+        rectangle, e.g. the rod (`(ny, nx - 2)`: rows bottom to top, the solid end columns left out).
+
+        **Returns:** `(rows, columns)` NumPy array.
+        """
+        mesh = self.mesh
+        if not isinstance(mesh, StructuredGrid):
+            raise ValueError("design_grid needs a structured grid (e.g. the rod); on another mesh, plot the values "
+                             "over the elements (DesignDomain.design_elements gives each value's element).")
+        elements = np.asarray(self.design_elements)
+        rows, columns = np.unique(elements // mesh.nx), np.unique(elements % mesh.nx)
+        if rows.size * columns.size != elements.size:
+            raise ValueError("The design elements do not fill a rectangle of the grid; design_grid cannot arrange them.")
+        values = np.asarray(values)
+        if values.shape != (self.n_design,):
+            raise ValueError(f"design_grid takes a vector of shape ({self.n_design},), got {values.shape}.")
+        return values.reshape(rows.size, columns.size)
+
     def initial_design(self, value: float = 0.5) -> Float[Array, " n_design"]:
         """A uniform design `x_e = value`."""
         return jnp.full((self.n_design,), float(value))
 
-    def check(self, x, x_min: float) -> Float[Array, " n_design"]:
+    def check(self, x, x_min: float, body: str | None = None) -> Float[Array, " n_design"]:
         """Validate a design and return it as float64: dtype and shape at trace time, values (NaN,
         inf, bounds `[x_min, 1]`) at once when `x` is concrete, else at run time. Raises
-        [`DesignError`][] (complex numbers refused; integers and float32 converted to float64)."""
-        x = design_array(x)
+        [`DesignError`][] (complex numbers refused; integers and float32 converted to float64).
+
+        `body` (optional) names the body in the messages.
+        """
+        of_body = "" if body is None else f" for body {body!r}"
+        x = design_array(x, of_body)
         if x.shape != (self.n_design,):
             raise DesignError(
-                f"Design vector has shape {x.shape}, expected ({self.n_design},): one density per design "
+                f"Design vector has shape {x.shape}, expected ({self.n_design},){of_body}: one density per design "
                 f"element ({self.mesh.n_elements} elements, {self.mesh.n_elements - self.n_design} passive). "
                 "Use initial_design(value) for a valid vector."
             )
         if not is_traced(x):
-            design_values(x, x_min)
+            design_values(x, x_min, of_body)
             return x
-        x = error_if(x, ~jnp.all(jnp.isfinite(x)), "Design vector contains NaN or inf; every density must be a "
-                     f"finite number in [x_min, 1] = [{x_min}, 1].", DesignError)
+        x = error_if(x, ~jnp.all(jnp.isfinite(x)), f"Design vector contains NaN or inf{of_body}; every density must "
+                     f"be a finite number in [x_min, 1] = [{x_min}, 1].", DesignError)
         return error_if(
             x, jnp.any((x < x_min) | (x > 1.0)),
-            f"Design densities must lie in [x_min, 1] = [{x_min}, 1]; clip or project the design first.",
+            f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; clip or project the design first.",
             DesignError,
         )
 

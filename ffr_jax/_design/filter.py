@@ -6,7 +6,9 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 from scipy.spatial import cKDTree
 
+from .designed_body import DesignedBody
 from .domain import DesignDomain
+from .mesh import StructuredGrid
 
 
 class DensityFilter(eqx.Module):
@@ -14,9 +16,9 @@ class DensityFilter(eqx.Module):
 
     `x_phys_e = sum_i w_ei a_i x_i / sum_i w_ei a_i`,  `w_ei = max(0, r - d_ei)`,
 
-    with `d_ei` the distance between the centroids of design elements `e` and `i` (divided by
-    `scale` per axis, if given) and `a_i` the element areas (all equal on a uniform grid, where
-    this is the filter of `ffr_jax._optimize._filter`). Rows of `H` sum to one, so `H` maps
+    with `d_ei` the distance between the centroids of design elements `e` and `i`, measured in
+    units of `scale` per axis, and `a_i` the element areas (all equal on a uniform grid, where
+    this is the classic cone filter). Rows of `H` sum to one, so `H` maps
     `[x_min, 1]^n` into itself. Passive elements (solid or void) carry no design variable and
     take no part: they neither enter nor receive a filtered density. A radius that reaches no
     neighbour (in particular `r = 0`) gives `H = I`.
@@ -27,10 +29,18 @@ class DensityFilter(eqx.Module):
     with weight 0), leaves of the pytree.
 
     **Arguments:**
-    - `domain`: the [`DesignDomain`][].
-    - `radius`: `r >= 0`, in the mesh's length unit (or in units of `scale`).
-    - `scale`: optional `(sx, sy)`: distances are measured in `(dx / sx, dy / sy)`, e.g. the
-      element size of a grid so that the radius counts elements (`1.5`: the 8 nearest).
+    - `domain`: the [`DesignDomain`][], or a [`DesignedBody`][] (its domain; e.g. `case.design`).
+    - `radius`: `r >= 0`, in units of `scale` (by default: in element sizes).
+    - `scale`: `(sx, sy)`: distances are measured in `(dx / sx, dy / sy)`. Default: the element
+      size — `(L / nx, h / ny)` on a [`StructuredGrid`][] (the rod: `1.5` reaches the 8 nearest
+      elements, `r <= 1` gives `H = I`), and `(h, h)` with `h = sqrt(mean area)` of the design
+      elements on any other mesh. `scale=(1, 1)` takes the radius in the mesh's length unit.
+
+    **Example:**
+    ```python
+    filt = fj.DensityFilter(case.design, radius=1.5)   # 1.5 element sizes
+    x_phys = filt(x)
+    ```
 
     !!! cite "References"
         T. E. Bruns, D. A. Tortorelli, Comput. Methods Appl. Mech. Eng. 190 (2001) 3443–3459.
@@ -42,25 +52,35 @@ class DensityFilter(eqx.Module):
     radius: float = eqx.field(static=True)
     neighbours: Int[Array, "n_design n_neighbours"]
     weights: Float[Array, "n_design n_neighbours"]
+    areas: Float[Array, " n_design"]
 
-    def __init__(self, domain: DesignDomain, radius: float, scale=None):
+    def __init__(self, domain: DesignDomain | DesignedBody, radius: float, scale=None):
+        if isinstance(domain, DesignedBody):
+            domain = domain.domain
+        if not isinstance(domain, DesignDomain):
+            raise TypeError(f"DensityFilter takes a DesignDomain or a DesignedBody (e.g. case.design), got "
+                            f"{type(domain).__name__}.")
         if not (radius >= 0.0 and np.isfinite(radius)):
-            raise ValueError(f"The filter radius must be a finite non-negative length, got {radius}; radius=0 means "
-                             "no filtering.")
-        centres = domain.design_centroids()
-        if scale is not None:
-            scale = np.asarray(scale, dtype=float)
-            if scale.shape != (2,) or not np.all((scale > 0) & np.isfinite(scale)):
-                raise ValueError(f"scale must be two positive lengths (sx, sy), got {scale}.")
-            centres = centres / scale
-        areas = domain.design_areas()
+            raise ValueError(f"The filter radius must be a finite non-negative number of element sizes, got {radius}; "
+                             "radius=0 means no filtering (1.5 takes the 8 nearest neighbours on a grid).")
+        centres, areas = domain.design_centroids(), domain.design_areas()
+        if scale is None:
+            mesh = domain.mesh
+            scale = (mesh.dx, mesh.dy) if isinstance(mesh, StructuredGrid) else (np.sqrt(np.mean(areas)),) * 2
+        scale = np.asarray(scale, dtype=float)
+        if scale.shape != (2,) or not np.all((scale > 0) & np.isfinite(scale)):
+            raise ValueError(f"scale must be two positive lengths (sx, sy), got {scale}.")
+        centres = centres / scale
         n = centres.shape[0]
         rows = cKDTree(centres).query_ball_point(centres, r=radius) if radius > 0 else [[e] for e in range(n)]
         counts = np.fromiter((len(r) for r in rows), dtype=np.int64, count=n)
         owner = np.repeat(np.arange(n), counts)
         flat = np.concatenate([np.sort(np.asarray(r, dtype=np.int64)) for r in rows])
         distance = np.linalg.norm(centres[flat] - centres[owner], axis=1)
-        w = (np.maximum(radius - distance, 0.0) if radius > 0 else np.ones(flat.size)) * areas[flat]
+        # A neighbour at distance r up to round-off (a grid neighbour at r = 1 element) gets weight 0 exactly.
+        reach = radius - distance
+        cone = np.where(reach > 1e-12 * radius, reach, 0.0) if radius > 0 else np.ones(flat.size)
+        w = cone * areas[flat]
         w = w / np.bincount(owner, weights=w, minlength=n)[owner]
         width = int(counts.max())
         slot = np.arange(flat.size) - np.repeat(np.cumsum(counts) - counts, counts)
@@ -71,6 +91,7 @@ class DensityFilter(eqx.Module):
         self.radius = float(radius)
         self.neighbours = jnp.asarray(neighbours, dtype=jnp.int32)
         self.weights = jnp.asarray(weights)
+        self.areas = jnp.asarray(areas)
 
     def __call__(self, x):
         """Physical densities `H x`, `(n_design,)`."""
@@ -81,8 +102,9 @@ class DensityFilter(eqx.Module):
         return jnp.zeros_like(g).at[self.neighbours].add(self.weights * g[:, None])
 
     def volume_weights(self):
-        """Column sums `c = H^T 1`, so that `sum(H x) = sum(c x)`."""
-        return self.transpose(jnp.ones(self.weights.shape[0], dtype=self.weights.dtype))
+        """Volume weights `c = n H^T a / sum(a)` (`a` the element areas), so that `mean(c x)` is the true
+        area fraction of the physical densities, `sum(a H x) / sum(a)`; `c = H^T 1` on a uniform grid."""
+        return self.areas.shape[0] * self.transpose(self.areas) / jnp.sum(self.areas)
 
     def matrix(self) -> Float[Array, "n_design n_design"]:
         """`H` as a dense matrix (inspection and tests only)."""

@@ -62,7 +62,9 @@ class QuadMesh:
     non-convex or self-intersecting (bow-tie) elements (a corner Jacobian of the wrong sign or
     zero), badly distorted elements, duplicate elements (the same node set twice), unused nodes
     (they would be rigid-body mechanisms; drop them with [`QuadMesh.without_unused_nodes`][]),
-    and duplicate nodes (two nodes at one position: the mesh would be cut there).
+    inverted elements folded over a neighbour (two elements on the same side of a shared edge:
+    the mesh overlaps itself), and duplicate nodes (two nodes at one position: the mesh would be
+    cut there).
 
     The digest covers the node coordinates and the connectivity after reordering; two meshes
     are equal iff their digests are.
@@ -111,6 +113,7 @@ class QuadMesh:
                 f"Duplicate elements: {_format_ids(dup)} repeat the node set of an earlier element; "
                 "remove the copies."
             )
+        self._check_folds(elements)
         used = np.zeros(n_nodes, dtype=bool)
         used[elements.ravel()] = True
         if not np.all(used):
@@ -158,6 +161,23 @@ class QuadMesh:
                 "if you accept the loss of accuracy."
             )
         return elements
+
+    @staticmethod
+    def _check_folds(elements):
+        """Counter-clockwise elements that share an edge run along it in opposite directions; two
+        elements running along an edge in the same direction lie on the same side of it: one of
+        them is inverted (folded over its neighbour), and the mesh overlaps itself."""
+        edges = np.stack([elements, np.roll(elements, -1, axis=1)], axis=-1).reshape(-1, 2)
+        _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+        repeated = np.flatnonzero(counts[inverse.ravel()] > 1)
+        if repeated.size:
+            owners = np.unique(repeated // 4)
+            a, b = edges[repeated[0]]
+            raise ValueError(
+                f"Elements {_format_ids(owners)} overlap: they lie on the same side of a shared edge (e.g. nodes "
+                f"{int(a)}-{int(b)}), so an element is inverted (folded over its neighbour). Remesh there, or fix "
+                "the node order of the inverted element together with its position."
+            )
 
     @staticmethod
     def _check_duplicate_nodes(nodes, elements):
@@ -270,31 +290,62 @@ class QuadMesh:
         return tuple(int(i) for i in arr)
 
 
-def structured_grid(nx: int, ny: int, length: float, height: float) -> QuadMesh:
-    """The `nx x ny` grid over `[0, L] x [-h/2, h/2]` with the numbering of the reference rod.
+class StructuredGrid(QuadMesh):
+    """The `nx x ny` grid over `[0, L] x [-h/2, h/2]`: a [`QuadMesh`][] that also knows its layout.
 
     Node `(i, j)` (column `i = 0..nx`, row `j = 0..ny`) sits at `(i L / nx, -h/2 + j h / ny)` with
     index `i (ny + 1) + j`; element `(i, j)` has the nodes `(i, j), (i+1, j), (i+1, j+1), (i, j+1)`
-    and index `j nx + i` (REFERENCE_CASE §1). Coordinates are computed with the same floating
-    point operations as `RodMesh.node_coordinates`, so the two agree bit for bit.
-
-    **Returns:** a [`QuadMesh`][] with `(nx + 1)(ny + 1)` nodes and `nx ny` elements.
+    and index `j nx + i` (REFERENCE_CASE §1). The attributes `nx`, `ny`, `length`, `height` (and
+    `dx`, `dy`) follow from the content, so equality and hashing stay those of the mesh content.
+    Build one with [`structured_grid`][].
     """
-    if not (isinstance(nx, int) and isinstance(ny, int)) or nx < 1 or ny < 1:
-        raise ValueError(f"nx and ny must be positive Python ints, got {nx!r}, {ny!r}.")
-    if not (length > 0 and height > 0):
-        raise ValueError(f"length and height must be positive, got {length}, {height}.")
-    dx, dy = length / nx, height / ny
-    i, j = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), indexing="ij")
-    nodes = np.stack([i * dx, -0.5 * height + j * dy], axis=-1).reshape(-1, 2)
-    j, i = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
-    i, j = i.ravel(), j.ravel()
 
-    def node(a, b):
-        return a * (ny + 1) + b
+    __slots__ = ("nx", "ny", "length", "height")
 
-    elements = np.stack([node(i, j), node(i + 1, j), node(i + 1, j + 1), node(i, j + 1)], axis=-1)
-    return QuadMesh(nodes, elements, orientation="refuse")
+    def __init__(self, nx: int, ny: int, length: float, height: float):
+        if not (isinstance(nx, int) and isinstance(ny, int)) or nx < 1 or ny < 1:
+            raise ValueError(f"nx and ny must be positive Python ints, got {nx!r}, {ny!r}.")
+        if not (length > 0 and height > 0):
+            raise ValueError(f"length and height must be positive, got {length}, {height}.")
+        self.nx, self.ny, self.length, self.height = nx, ny, float(length), float(height)
+        dx, dy = self.dx, self.dy
+        i, j = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), indexing="ij")
+        nodes = np.stack([i * dx, -0.5 * height + j * dy], axis=-1).reshape(-1, 2)
+        j, i = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+        i, j = i.ravel(), j.ravel()
+        elements = np.stack([self.node(i, j), self.node(i + 1, j), self.node(i + 1, j + 1), self.node(i, j + 1)],
+                            axis=-1)
+        super().__init__(nodes, elements, orientation="refuse")
+
+    @property
+    def dx(self) -> float:
+        """Element size along x, `L / nx`."""
+        return self.length / self.nx
+
+    @property
+    def dy(self) -> float:
+        """Element size along y, `h / ny`."""
+        return self.height / self.ny
+
+    def node(self, i, j):
+        """Index of node `(i, j)` (column, row), `i (ny + 1) + j`."""
+        return i * (self.ny + 1) + j
+
+    def element(self, i, j):
+        """Index of element `(i, j)` (column, row), `j nx + i`."""
+        return j * self.nx + i
+
+    def __repr__(self) -> str:
+        return (f"StructuredGrid(nx={self.nx}, ny={self.ny}, length={self.length}, height={self.height}, "
+                f"digest={self.digest[:12]})")
+
+
+def structured_grid(nx: int, ny: int, length: float, height: float) -> StructuredGrid:
+    """The `nx x ny` [`StructuredGrid`][] over `[0, L] x [-h/2, h/2]` (the numbering of the reference rod).
+
+    **Returns:** a mesh with `(nx + 1)(ny + 1)` nodes and `nx ny` elements.
+    """
+    return StructuredGrid(nx, ny, length, height)
 
 
 # meshio cell types that are planar elements but not 4-node quadrilaterals.

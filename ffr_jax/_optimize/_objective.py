@@ -7,7 +7,7 @@ import jax
 from .. import _api
 from .._case import Case
 from .._sensitivity._base import AbstractSensitivity
-from ._filter import DensityFilter
+from .._design.filter import DensityFilter
 from ._projection import HeavisideProjection
 
 

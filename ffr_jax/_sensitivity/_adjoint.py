@@ -377,7 +377,7 @@ class Adjoint(AbstractSensitivity):
         jumps = problem.jump_ts
         controller = diffrax.PIDController(rtol=self.rtol, atol=self.atol, jump_ts=jnp.asarray(jumps) if jumps else None)
         solution = diffrax.diffeqsolve(
-            diffrax.ODETerm(field), solver, problem.t1, problem.t0, None, state1,
+            diffrax.ODETerm(field), solver, problem.t1, problem.t0, None if problem.dt0 is None else -problem.dt0, state1,
             stepsize_controller=controller, saveat=diffrax.SaveAt(t1=True, dense=not in_ode),
             max_steps=max_steps, adjoint=diffrax.RecursiveCheckpointAdjoint(),
         )
@@ -388,7 +388,7 @@ class Adjoint(AbstractSensitivity):
         forward = solve_minimal(
             problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
             integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol, dense=True,
-            max_steps=max_steps, jump_ts=problem.jump_ts,
+            max_steps=max_steps, jump_ts=problem.jump_ts, dt0=problem.dt0,
         )
         params = (problem.scene, problem.objective)
         unravel = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[1]

@@ -38,7 +38,7 @@ def psi_of(problem: Problem, *, rtol, atol, solver, max_steps, adjoint) -> jnp.n
     return solve_minimal(
         problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
         integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol,
-        max_steps=max_steps, adjoint=adjoint, jump_ts=problem.jump_ts,
+        max_steps=max_steps, adjoint=adjoint, jump_ts=problem.jump_ts, dt0=problem.dt0,
     ).psi
 
 

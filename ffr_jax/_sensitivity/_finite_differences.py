@@ -3,7 +3,9 @@
 import diffrax
 import equinox as eqx
 import jax
+import jax.flatten_util
 import jax.numpy as jnp
+import numpy as np
 
 from .._checks import integer, positive
 from ._base import AbstractSensitivity, psi_of
@@ -23,6 +25,15 @@ def _entries(entries) -> tuple[int, ...] | None:
     return tuple(integer(k, "FiniteDifferences(entries=...): every index", 0) for k in entries)
 
 
+def _lower_bounds(case, x):
+    """`x_min` of every design variable, in the form of `x` (a dict by body, or one body's array), as
+    NumPy arrays (known at trace time: the shapes are static and `x_min` is a Python float)."""
+    bodies = getattr(case.design_map, "bodies", None)
+    if isinstance(x, dict) and bodies is not None:
+        return {name: np.full(jnp.shape(value), bodies[name].material.x_min) for name, value in x.items()}
+    return np.full(jnp.shape(x), case.material.x_min)
+
+
 class FiniteDifferences(AbstractSensitivity):
     """Finite differences of `psi` in the design variables, central where the bounds allow:
 
@@ -37,7 +48,9 @@ class FiniteDifferences(AbstractSensitivity):
       the forward tolerance far below `h^2`). It must be below `(1 - x_min) / 2`, so that one side
       always fits.
     - `entries`: optional indices of the design variables to difference (default: all); other
-      entries of the returned gradient are NaN so that they cannot be mistaken for values.
+      entries of the returned gradient are NaN so that they cannot be mistaken for values. For a
+      dict design the indices count in the flattened design (`jax.flatten_util.ravel_pytree`:
+      bodies in sorted name order).
     - `batch_size`: how many perturbed designs are simulated at once (`jax.lax.map` over
       `jax.vmap` batches), an integer `>= 1`.
     """
@@ -56,17 +69,20 @@ class FiniteDifferences(AbstractSensitivity):
                          "value_and_grad(case, x, 'fd'), or another method (e.g. 'adjoint') for problem gradients.")
 
     def value_and_grad_design(self, case, x, *, rtol, atol, solver, max_steps):
-        lo, hi = case.material.x_min, 1.0
-        if not self.step < (hi - lo) / 2:
-            raise ValueError(f"FiniteDifferences(step={self.step}) must be below (1 - x_min) / 2 = {(hi - lo) / 2:g}, "
+        adjoint = diffrax.RecursiveCheckpointAdjoint()
+        lower = _lower_bounds(case, x)
+        x, unravel = jax.flatten_util.ravel_pytree(x)
+        lo, hi = np.concatenate([np.ravel(a) for a in jax.tree_util.tree_leaves(lower)]), 1.0
+        widest = float(np.max(lo))
+        if not self.step < (hi - widest) / 2:
+            raise ValueError(f"FiniteDifferences(step={self.step}) must be below (1 - x_min) / 2 = {(hi - widest) / 2:g}, "
                              "so that every density can be perturbed to one side inside [x_min, 1].")
         if self.entries is not None and max(self.entries) >= x.size:
             raise ValueError(f"FiniteDifferences(entries=...) holds index {max(self.entries)}, but the design has "
                              f"{x.size} variables (indices 0 to {x.size - 1}).")
-        adjoint = diffrax.RecursiveCheckpointAdjoint()
 
         def psi(xx):
-            return psi_of(case.problem.with_scene(case.scene(xx)), rtol=rtol, atol=atol, solver=solver,
+            return psi_of(case.problem.with_scene(case.scene(unravel(xx))), rtol=rtol, atol=atol, solver=solver,
                           max_steps=max_steps, adjoint=adjoint)
 
         idx = jnp.arange(x.size) if self.entries is None else jnp.asarray(self.entries, int)
@@ -74,7 +90,7 @@ class FiniteDifferences(AbstractSensitivity):
         # Central where x_k +- h stays inside [x_min, 1], one-sided into the admissible side where not.
         # Since h < (1 - x_min) / 2, at least one side fits, so up + down >= h > 0.
         up = jnp.where(x[idx] + self.step <= hi, self.step, 0.0).astype(x.dtype)
-        down = jnp.where(x[idx] - self.step >= lo, self.step, 0.0).astype(x.dtype)
+        down = jnp.where(x[idx] - self.step >= jnp.asarray(lo)[idx], self.step, 0.0).astype(x.dtype)
         # Every design (x, then x + u_k e_k, then x - d_k e_k) goes through one `lax.map` over equal
         # vmap batches, padded with copies of x: no remainder batch and no second pipeline runs
         # beside the map. Two independent batched LAPACK calls in one XLA program (e.g. the
@@ -91,4 +107,4 @@ class FiniteDifferences(AbstractSensitivity):
         values = jax.lax.map(lambda a: perturbed(*a), (entry, shift), batch_size=self.batch_size)
         diffs = (values[1:n + 1] - values[n + 1:2 * n + 1]) / (up + down)
         grad = jnp.full_like(x, jnp.nan).at[idx].set(diffs)
-        return values[0], grad
+        return values[0], unravel(grad)

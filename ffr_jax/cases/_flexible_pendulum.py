@@ -3,8 +3,9 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import Case, RodDesignMap
-from .._fe import RodMesh
+from .._case import Case
+from .._design.design_map import DesignMap
+from .._design.material import SIMP
 from .._objective._compliance import Compliance
 from .._problem import Problem
 from .._scene._body import Body
@@ -12,8 +13,7 @@ from .._scene._damping import ModalDamping
 from .._scene._gravity import Gravity
 from .._scene._ground_revolute import GroundRevolute
 from .._scene._scene import Scene
-from .._simp import SIMP, RodDesign
-from ._slider_crank import rod_template
+from ._rod import rod_body
 
 
 def flexible_pendulum(
@@ -52,18 +52,17 @@ def flexible_pendulum(
     """
     if t1 <= 0:
         raise ValueError(f"t1 must be positive, got {t1}.")
-    mesh = RodMesh(nx, ny, length, height, thickness)
-    design = RodDesign(mesh, material)
+    body = rod_body(nx, ny, n_modes, length=length, height=height, thickness=thickness, material=material)
     forces = ()
     if gravity:
         forces += (Gravity((0.0, -float(g))),)
     if damping_ratio is not None:
         forces += (ModalDamping(body=0, ratio=damping_ratio),)
     scene = Scene(
-        bodies=(Body("rod", rod_template(design, n_modes)),),
+        bodies=(Body("rod", body.uniform_body_data()),),
         constraints=(GroundRevolute(body=0, marker=0, point=(0.0, 0.0)),),
         forces=forces,
     )
     y_r0 = jnp.zeros(scene.n_coordinates).at[2].set(float(initial_angle))
     problem = Problem(scene, t1, positions=y_r0, objective=Compliance(body=0))
-    return Case(problem=problem, design_map=RodDesignMap(design=design, n_modes=n_modes, body=0))
+    return Case(problem=problem, design_map=DesignMap({"rod": body}))

@@ -3,9 +3,10 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._body_data import rigid_body_data
-from .._case import Case, RodDesignMap
-from .._fe import RodMesh
+from .._scene._body_data import rigid_body_data
+from .._case import Case
+from .._design.design_map import DesignMap
+from .._design.material import SIMP
 from .._model import choose_partition
 from .._objective._compliance import Compliance
 from .._problem import Problem
@@ -15,13 +16,27 @@ from .._scene._ground_revolute import GroundRevolute
 from .._scene._laws import RampLaw
 from .._scene._revolute import Revolute
 from .._scene._scene import Scene
-from .._simp import SIMP, RodDesign
-from ._slider_crank import rod_template
+from ._rod import rod_body
 
 
-def _uniform_bar(mass: float, length: float):
+def uniform_bar(mass: float, length: float):
     """Rigid body data of a slender uniform bar from its frame origin (marker 0) to `(length, 0)` (marker 1)."""
     return rigid_body_data(mass, (0.5 * mass * length, 0.0), mass * length**2 / 3.0, [[0.0, 0.0], [length, 0.0]])
+
+
+def check_grashof(crank: float, coupler: float, rocker: float, ground: float) -> None:
+    """Raise a `ValueError` unless the link lengths make a Grashof crank–rocker (the crank turns fully)."""
+    links = {"crank": crank, "coupler": coupler, "rocker": rocker, "ground": ground}
+    if min(links.values()) <= 0:
+        raise ValueError(f"All link lengths must be positive, got {links}.")
+    shortest, longest = min(links.values()), max(links.values())
+    if crank != shortest or shortest + longest > sum(links.values()) - shortest - longest:
+        raise ValueError(
+            f"The link lengths {links} do not make a Grashof crank–rocker (the crank must be the "
+            "shortest link and shortest + longest <= sum of the other two): the crank cannot turn "
+            "fully and the linkage would fail to assemble during the run. Shorten the crank or "
+            "change the other links."
+        )
 
 
 def rigid_four_bar_position(phi, chord, crank, rocker, pivot):
@@ -101,29 +116,18 @@ def four_bar(
     - `speed`, `t_ramp`: crank run-up; `crank_mass`, `rocker_mass`: rigid link masses.
     - `length`, `height`, `thickness`, `material`: the coupler rod.
 
-    **Returns:** a [`Case`][] whose design map's `body = 1` (the coupler).
+    **Returns:** a [`Case`][] whose design map designs the body `"coupler"` (scene body 1).
     """
-    links = {"crank": crank, "coupler": length, "rocker": rocker, "ground": ground}
-    if min(links.values()) <= 0:
-        raise ValueError(f"All link lengths must be positive, got {links}.")
-    shortest, longest = min(links.values()), max(links.values())
-    if crank != shortest or shortest + longest > sum(links.values()) - shortest - longest:
-        raise ValueError(
-            f"The link lengths {links} do not make a Grashof crank–rocker (the crank must be the "
-            "shortest link and shortest + longest <= sum of the other two): the crank cannot turn "
-            "fully and the linkage would fail to assemble during the run. Shorten the crank or "
-            "change the other links."
-        )
+    check_grashof(crank, length, rocker, ground)
     if t1 <= 0:
         raise ValueError(f"t1 must be positive, got {t1}.")
-    mesh = RodMesh(nx, ny, length, height, thickness)
-    design = RodDesign(mesh, material)
+    body = rod_body(nx, ny, n_modes, length=length, height=height, thickness=thickness, material=material)
     law = RampLaw(t_ramp=t_ramp, angle_at_ramp=speed * t_ramp / 2, speed=speed)
     scene = Scene(
         bodies=(
-            Body("crank", _uniform_bar(crank_mass, crank)),
-            Body("coupler", rod_template(design, n_modes)),
-            Body("rocker", _uniform_bar(rocker_mass, rocker)),
+            Body("crank", uniform_bar(crank_mass, crank)),
+            Body("coupler", body.uniform_body_data()),
+            Body("rocker", uniform_bar(rocker_mass, rocker)),
         ),
         constraints=(
             GroundRevolute(body=0, marker=0, point=(0.0, 0.0)),
@@ -143,4 +147,4 @@ def four_bar(
         raise ValueError(f"The four-bar's rigid coordinates {rigid} are not a regular dependent set at phi = 0.")
     problem = Problem(scene, t1, positions=y_r0, objective=Compliance(body=1), partition=partition,
                       dependent_guess=guess)
-    return Case(problem=problem, design_map=RodDesignMap(design=design, n_modes=n_modes, body=1))
+    return Case(problem=problem, design_map=DesignMap({"coupler": body}))

@@ -3,7 +3,7 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._body_data import rigid_body_data
+from .._scene._body_data import rigid_body_data
 from .._model import Partition, choose_partition
 from .._objective._base import AbstractIntegrand
 from .._objective._kinetic_energy import KineticEnergy

@@ -1,14 +1,15 @@
 """The flexible slider–crank of the paper (Sect. 4), exactly as fixed in REFERENCE_CASE.md."""
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._body_data import flexible_body_data
-from .._case import Case, RodDesignMap
+from .._case import Case
+from .._design.design_map import DesignMap
+from .._design.designed_body import DesignedBody
+from .._design.material import SIMP
+from .._design.modal.auto import AutoModes
+from .._design.modal.base import AbstractModalSolver
 from .._checks import integer, number, positive
-from .._fe import RodMesh, mass_matrix, stiffness_matrix
-from .._modes import hinged_modes
 from .._objective._compliance import Compliance
 from .._problem import Problem
 from .._scene._body import Body
@@ -16,9 +17,7 @@ from .._scene._laws import RampLaw
 from .._scene._point_on_line import PointOnLine
 from .._scene._prescribed_point import CrankPin
 from .._scene._scene import Scene
-from .._simp import SIMP, RodDesign
-from .._sparse_fe import resolve_fe_path, sparse_mass_matrix, sparse_stiffness_matrix
-from .._sparse_modes import sparse_hinged_modes
+from ._rod import rod_body
 
 
 def slider_crank_guess(t, y, scene):
@@ -33,29 +32,12 @@ def slider_crank_guess(t, y, scene):
     return jnp.stack([pin[0], pin[1], -jnp.arcsin(pin[1] / length)])
 
 
-def rod_template(design: RodDesign, n_modes: int, value: float = 0.5, fe_path: str = "auto"):
-    """Body data of the rod at a uniform design (used to build scenes and choose partitions).
-
-    `fe_path` (`"auto"`, `"dense"`, `"sparse"`) picks the FE path as for [`RodDesignMap`][].
-    Compiled as one function: op-by-op dispatch of the body-data products costs seconds.
-    """
-    return _uniform_rod_data(design, n_modes, value, fe_path)
-
-
-@eqx.filter_jit
-def _uniform_rod_data(design: RodDesign, n_modes: int, value: float, fe_path: str):
-    mesh = design.mesh
-    xe = design.element_densities(design.initial_design(value))
-    youngs, densities = design.material.youngs(xe), design.material.densities(xe)
-    a, b = mesh.node_a, mesh.node_b
-    fixed = (2 * a, 2 * a + 1, 2 * b + 1)
-    if resolve_fe_path(fe_path, mesh) == "sparse":
-        k, m = sparse_stiffness_matrix(mesh, youngs), sparse_mass_matrix(mesh, densities)
-        basis = sparse_hinged_modes(k, m, fixed, n_modes)
-    else:
-        k, m = stiffness_matrix(mesh, youngs), mass_matrix(mesh, densities)
-        basis = hinged_modes(k, m, fixed, n_modes)
-    return flexible_body_data(mesh, m, k, basis.modes, (a, b))
+def _check_eccentricity(eccentricity: float, length: float) -> None:
+    if not 0 < number(eccentricity, "slider_crank(eccentricity=...)") < length:
+        raise ValueError(
+            f"The crank eccentricity must lie in (0, l) = (0, {length}) for the slider–crank to assemble "
+            f"at every crank angle, got {eccentricity}."
+        )
 
 
 def slider_crank(
@@ -71,7 +53,8 @@ def slider_crank(
     height: float = 0.06,
     thickness: float = 0.01,
     material: SIMP = SIMP(),
-    fe_path: str = "auto",
+    modal_solver: AbstractModalSolver = AutoModes(),
+    rod: DesignedBody | None = None,
 ) -> Case:
     """The flexible slider–crank (REFERENCE_CASE.md, paper Sect. 4) and its family of small variants.
 
@@ -86,32 +69,34 @@ def slider_crank(
     - `nx`, `ny`: mesh of the rod (`ny` even, `nx >= 4`); `n_modes`: retained modes; `t1`: end time.
     - `eccentricity`, `speed`, `t_ramp`: crank; `length`, `height`, `thickness`: rod.
     - `material`: the SIMP law (defaults of REFERENCE_CASE §1).
-    - `fe_path`: `"auto"` (default: sparse FE above 1,000 degrees of freedom, i.e. the reference
-      100 x 6 rod and up to 1000 x 100 and beyond), `"dense"` or `"sparse"`; both paths give the
-      same numbers. Forward mode (`jax.jvp`) with respect to `x` needs `"dense"`.
+    - `modal_solver`: [`AutoModes`][] (default: Lanczos above 1,000 degrees of freedom, i.e. the
+      reference 100 x 6 rod and up to 1000 x 100 and beyond), [`DenseModes`][] or
+      [`LanczosModes`][]; all give the same numbers. Forward mode (`jax.jvp`) with respect to `x`
+      needs `DenseModes()`.
+    - `rod`: another designed connecting rod (e.g. the rod read from a mesh file, or any body whose
+      marker 0 is the crank pin A and marker 1 the slider point B, both on the frame's x-axis);
+      default [`rod_body`][]`(nx, ny, n_modes, ...)` with the arguments above.
 
     **Returns:** a [`Case`][]: the [`Problem`][] with the rod's compliance as objective and a
-    [`RodDesignMap`][] of the rod.
+    [`DesignMap`][] of the rod (`case.design` is its [`DesignedBody`][], see [`rod_body`][]).
     """
     # Every number is checked before anything is computed (the rod's modes compile first).
-    for name, value in (("nx", nx), ("ny", ny), ("n_modes", n_modes)):
-        integer(value, f"slider_crank({name}=...)", 1)
     t1 = positive(t1, "slider_crank(t1=...)", "It is the end time in s.")
-    length = positive(length, "slider_crank(length=...)")
-    positive(height, "slider_crank(height=...)")
-    positive(thickness, "slider_crank(thickness=...)")
     t_ramp = positive(t_ramp, "slider_crank(t_ramp=...)", "It is the run-up time of the crank in s.")
     speed = number(speed, "slider_crank(speed=...)")
-    if not (isinstance(eccentricity, (int, float, np.floating, np.integer)) and 0 < eccentricity < length):
-        raise ValueError(
-            f"The crank eccentricity must lie in (0, l) = (0, {length}) for the slider–crank to assemble "
-            f"at every crank angle, got {eccentricity}."
-        )
-    if not isinstance(material, SIMP):
-        raise ValueError(f"material must be an ffr_jax.SIMP, got {type(material).__name__}.")
-    mesh = RodMesh(nx, ny, length, height, thickness)
-    design = RodDesign(mesh, material)
-    rod = Body("rod", rod_template(design, n_modes, fe_path=fe_path))
+    if rod is None:
+        for name, value in (("nx", nx), ("ny", ny), ("n_modes", n_modes)):
+            integer(value, f"slider_crank({name}=...)", 1)
+        length = positive(length, "slider_crank(length=...)")
+        positive(height, "slider_crank(height=...)")
+        positive(thickness, "slider_crank(thickness=...)")
+        if not isinstance(material, SIMP):
+            raise ValueError(f"material must be an ffr_jax.SIMP, got {type(material).__name__}.")
+        _check_eccentricity(eccentricity, length)
+    body = rod if rod is not None else rod_body(nx, ny, n_modes, length=length, height=height,
+                                                thickness=thickness, material=material, modal_solver=modal_solver)
+    rod = Body("rod", body.uniform_body_data())
+    _check_eccentricity(eccentricity, float(rod.data.marker_positions[1, 0]))
     law = RampLaw(t_ramp=t_ramp, angle_at_ramp=speed * t_ramp / 2, speed=speed)
     scene = Scene(
         bodies=(rod,),
@@ -122,4 +107,4 @@ def slider_crank(
     )
     y_r0 = jnp.zeros(scene.n_coordinates).at[0].set(eccentricity)
     problem = Problem(scene, t1, positions=y_r0, objective=Compliance(body=0), dependent_guess=slider_crank_guess)
-    return Case(problem=problem, design_map=RodDesignMap(design=design, n_modes=n_modes, body=0, fe_path=fe_path))
+    return Case(problem=problem, design_map=DesignMap({"rod": body}))

@@ -4,8 +4,9 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import Case, RodDesignMap
-from .._fe import RodMesh
+from .._case import Case
+from .._design.design_map import DesignMap
+from .._design.material import SIMP
 from .._objective._compliance import Compliance
 from .._problem import Problem
 from .._scene._angle_driver import AngleDriver
@@ -14,8 +15,7 @@ from .._scene._ground_revolute import GroundRevolute
 from .._scene._laws import ConstantSpeedLaw
 from .._scene._scene import Scene
 from .._scene._stiffening import GeometricStiffening
-from .._simp import SIMP, RodDesign
-from ._slider_crank import rod_template
+from ._rod import rod_body
 
 
 def spinning_beam(
@@ -54,11 +54,10 @@ def spinning_beam(
     """
     if t1 <= 0:
         raise ValueError(f"t1 must be positive, got {t1}.")
-    mesh = RodMesh(nx, ny, length, height, thickness)
-    design = RodDesign(mesh, material)
+    body = rod_body(nx, ny, n_modes, length=length, height=height, thickness=thickness, material=material)
     forces = (GeometricStiffening(body=0, modal_geometric_stiffness=jnp.zeros((n_modes, n_modes))),) if stiffening else ()
     scene = Scene(
-        bodies=(Body("rod", rod_template(design, n_modes)),),
+        bodies=(Body("rod", body.uniform_body_data()),),
         constraints=(
             GroundRevolute(body=0, marker=0, point=(0.0, 0.0)),
             AngleDriver(body=0, angle=ConstantSpeedLaw(speed)),
@@ -68,7 +67,7 @@ def spinning_beam(
     y_r0 = jnp.zeros(scene.n_coordinates).at[3].set(float(perturbation))
     z_r0 = jnp.zeros(scene.n_coordinates).at[2].set(float(speed))
     problem = Problem(scene, t1, positions=y_r0, velocities=z_r0, objective=Compliance(body=0))
-    case = Case(problem=problem, design_map=RodDesignMap(design=design, n_modes=n_modes, body=0))
+    case = Case(problem=problem, design_map=DesignMap({"rod": body}))
     # The template carries K_geo of the uniform design the template's body data belong to.
     if stiffening:
         case = eqx.tree_at(lambda c: c.problem.scene, case, case.scene(case.initial_design(0.5)))

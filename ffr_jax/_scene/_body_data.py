@@ -23,7 +23,8 @@ the stacked undeformed coordinates:
 
 (`M` of a plane element is `m_s ⊗ I_2` in interleaved degrees of freedom, so it commutes with
 rotations applied node by node; this is what makes the kinetic energy a function of these few
-integrals.) A rigid body is the same data with `n_q = 0`.
+integrals.) A rigid body is the same data with `n_q = 0`. The design side computes these data
+for a finite element body (`ffr_jax._design.body_data`).
 """
 
 import equinox as eqx
@@ -32,7 +33,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._fe import RodMesh
 
 
 class BodyData(eqx.Module):
@@ -78,7 +78,7 @@ def _check_body_data(data: BodyData) -> None:
         if got != want or -1 in want:
             raise ValueError(
                 f"BodyData.{name} has shape {got}, expected {want} (n_q = {n_q} modes from modal_mass, "
-                f"{n_m} markers from marker_positions); see ffr_jax.rigid_body_data / flexible_body_data."
+                f"{n_m} markers from marker_positions); see ffr_jax.rigid_body_data, or ffr_jax.DesignedBody.body_data for a finite element body."
             )
     leaves = [getattr(data, name) for name in expected]
     if any(isinstance(a, jax.core.Tracer) for a in leaves):
@@ -139,48 +139,4 @@ def rigid_body_data(mass, first_moment, inertia, marker_positions) -> BodyData:
         modal_stiffness=jnp.zeros((0, 0)),
         marker_positions=marker_positions,
         marker_modes=jnp.zeros((n_markers, 2, 0)),
-    )
-
-
-def _rotate_nodewise(v):
-    """`I~ v` node by node: `(u_x, u_y) -> (-u_y, u_x)` for stacked vectors `(2 n, ...)`."""
-    pairs = v.reshape((v.shape[0] // 2, 2) + v.shape[1:])
-    return jnp.stack([-pairs[:, 1], pairs[:, 0]], axis=1).reshape(v.shape)
-
-
-def flexible_body_data(mesh: RodMesh, mass_matrix, stiffness_matrix, modes, marker_nodes: tuple[int, ...]) -> BodyData:
-    """Standard input data of a finite element body from its matrices and retained modes.
-
-    Every integral is evaluated as a quadratic form of the consistent mass matrix with nodal
-    vectors, so it is exact for the FE model (see the module docstring for the definitions).
-
-    **Arguments:**
-    - `mesh`: node coordinates (body frame) and layout.
-    - `mass_matrix`, `stiffness_matrix`: `(n_dof, n_dof)` global `M` and `K`.
-    - `modes`: `(n_dof, n_q)` the shape vectors `Phi`.
-    - `marker_nodes`: static tuple of node indices used as joint points.
-
-    **Returns:** a [`BodyData`][].
-    """
-    coords = jnp.asarray(mesh.node_coordinates())
-    c = coords.ravel()
-    n_dof = c.size
-    e = jnp.zeros((n_dof, 2)).at[0::2, 0].set(1.0).at[1::2, 1].set(1.0)
-    m_phi = mass_matrix @ modes
-    m_c = mass_matrix @ c
-    m_e = mass_matrix @ e
-    idx = jnp.asarray(marker_nodes, dtype=int)
-    marker_modes = modes.reshape(mesh.n_nodes, 2, modes.shape[1])[idx]
-    return BodyData(
-        mass=e[:, 0] @ m_e[:, 0],
-        first_moment=e.T @ m_c,
-        modal_moment=e.T @ m_phi,
-        inertia=c @ m_c,
-        inertia_q=modes.T @ m_c,
-        modal_mass=modes.T @ m_phi,
-        coupling_0=m_phi.T @ _rotate_nodewise(c),
-        coupling=m_phi.T @ _rotate_nodewise(modes),
-        modal_stiffness=modes.T @ (stiffness_matrix @ modes),
-        marker_positions=coords[idx],
-        marker_modes=marker_modes,
     )
