@@ -135,7 +135,17 @@ def design_values(x, x_min: float, of_body: str = "") -> None:
     if bad.size:
         raise DesignError(f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; {_entries(bad, values)} "
                           f"{'is' if bad.size == 1 else 'are'} outside. Clip or project the design first "
-                          f"(e.g. jnp.clip(x, {x_min}, 1)).")
+                          f"(e.g. jnp.clip(x, {x_min}, 1)).{_rounding_hint(values[bad], x_min)}")
+
+
+def _rounding_hint(outside: np.ndarray, x_min: float) -> str:
+    """A hint when the densities outside lie within float32 rounding of a bound (a float32 design
+    clipped to `[x_min, 1]` holds `float32(0.01) = 0.0099999998 < 0.01`)."""
+    near = np.abs(outside - x_min) <= 1e-7 * x_min
+    if not np.any(near):
+        return ""
+    return (" They lie within float32 rounding of x_min: build the design in float64 (jnp.float64) or clip it "
+            "after converting, x = jnp.clip(jnp.asarray(x, jnp.float64), x_min, 1).")
 
 
 def _entries(index: np.ndarray, values: np.ndarray) -> str:

@@ -190,6 +190,8 @@ API = [
     Bad("SIMP(density=-8750)", lambda c: fj.SIMP(density=-8750.0), V, "density=...\\) must be positive", "SIMP()"),
     Bad("SIMP(youngs_modulus=nan)", lambda c: fj.SIMP(youngs_modulus=NAN), V, "must be finite", "SIMP()"),
     Bad("complex design", lambda c: fj.objective(c.case, c.x.astype(complex)), DE, "is complex", "design check"),
+    Bad("float32 design at x_min", lambda c: fj.objective(c.case, jnp.full(4, 0.01, jnp.float32)), DE,
+        "within float32 rounding of x_min", "design check"),
     Bad("string design", lambda c: fj.objective(c.case, np.array(["a"] * 4)), DE, "real numbers", "design check"),
     # --- right error, wrong message before issue 17 ------------------------------------------------
     Bad("density 1.5 under jax.vmap", lambda c: jax.vmap(lambda x: fj.objective(c.case, x))(
