@@ -18,7 +18,7 @@ from ._errors import DesignError
 # Relative tolerances of the ODE solves. At RTOL_MAX and above the step-size controller accepts steps
 # with a local error of a percent or more, and nothing bounds the error of psi: on the 4 x 2
 # slider-crank psi is off by 9e-6 at rtol 1e-2, 3e-4 at 0.1 and a factor 7,000 at 1
-# (benchmarks/RESULTS.md, "Bad input", second table); the issue's 12 x 2 case gave psi = 1.4e101 at
+# (benchmarks/RESULTS.md, "Bad input", second table); the small case of issue 17 gave psi = 1.4e101 at
 # rtol = 1. Below RTOL_MIN (about 45 float64 machine epsilons) the error estimate of a step is
 # round-off noise, so steps are rejected at random until the step budget runs out.
 RTOL_MIN = 1e-14
