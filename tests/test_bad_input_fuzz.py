@@ -105,21 +105,22 @@ def test_user_jit_error_reads_the_package_message_first(ctx, caplog):
 def test_finite_differences_at_the_bounds_and_float32(ctx):
     """Densities at 1 and at x_min are differenced one-sided (before: a bounds error naming no step); the
     quotient is the one-sided one of two objective values. A float32 design gives a float64 gradient."""
+    h = ctx.FD.step
     x = ctx.x.at[0].set(1.0).at[1].set(ctx.case.material.x_min)
-    h = 1e-4
-    fd = fj.FiniteDifferences(step=h, entries=(0, 1, 2), batch_size=7)
-    psi, grad = fj.value_and_grad(ctx.case, x, fd)
+    psi, grad = ctx.gradient(ctx.case, x)
     grad = np.asarray(grad)
     assert grad.dtype == np.float64 and np.all(np.isfinite(grad[:3])) and np.all(np.isnan(grad[3:]))
-    down = (float(psi) - float(fj.objective(ctx.case, x.at[0].add(-h)))) / h
-    up = (float(fj.objective(ctx.case, x.at[1].add(h))) - float(psi)) / h
-    # The same forward solves (rtol 1e-10) as inside the finite differences, in another program: their
-    # values agree to a few rtol of psi, so the quotients to ~1e-10 psi / h = 1e-6 psi; 1e-4 of the
-    # entry's size leaves room and still tells one-sided (O(h)) from a central quotient, which would
-    # evaluate outside [x_min, 1] and raise.
+    # psi at x - h e_0 and at x + h e_1: the value that the same program returns at those designs.
+    psi_down = float(ctx.gradient(ctx.case, x.at[0].add(-h))[0])
+    psi_up = float(ctx.gradient(ctx.case, x.at[1].add(h))[0])
+    down, up = (float(psi) - psi_down) / h, (psi_up - float(psi)) / h
+    # The same forward solves (rtol 1e-10) at the same designs, in other lanes of the batch: their values
+    # agree to a few rtol of psi, so the quotients to ~1e-10 psi / h = 1e-6 psi; 1e-4 of the entry's
+    # size leaves room and still tells the one-sided quotient from any other (a central one would
+    # evaluate outside [x_min, 1] and raise).
     for fd_value, quotient in ((grad[0], down), (grad[1], up)):
         assert abs(fd_value - quotient) <= 1e-4 * abs(quotient) + 1e-6 * abs(float(psi)), (fd_value, quotient)
-    _, grad32 = fj.value_and_grad(ctx.case, ctx.x.astype(jnp.float32), fd)
+    _, grad32 = ctx.gradient(ctx.case, ctx.x.astype(jnp.float32))
     assert grad32.dtype == jnp.float64
 
 
