@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .._api import METHODS
+from .._cli_checks import optimize_options
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
 
@@ -103,8 +104,7 @@ def _run(args: argparse.Namespace) -> int:
     import ffr_jax as fj
 
     directory, s = _settings(args)
-    if s["beta"] < 0.0:
-        raise ValueError(f"--projection-beta must be >= 0 (0 = no projection), got {s['beta']}.")
+    optimize_options(s, args, directory, resume=args.resume is not None)
     case = fj.cases.slider_crank(nx=s["nx"], ny=s["ny"], n_modes=s["modes"], t1=s["t1"])
     filt = fj.DensityFilter(case.design, s["filter_radius"])
     projection, beta = None, None
