@@ -43,10 +43,10 @@ if _cache:
 # same case, `helpers.small_case`, which is cached per process.) The order after issues 12 and 13
 # (design subpackage, problem type): the older modules keep their measured ranking; test_problem and the
 # test_design_* modules are placed by their single-process times on the shared, loaded machine (only
-# the ranking is meant); test_design_invariant and test_design_map are estimates (not measured alone).
+# the ranking is meant; benchmarks/RESULTS.md, "Test modules one at a time").
 _SHARED_PROGRAMS = ("test_sensitivity", "test_hard_cases", "test_adjoint_quadrature")
-_LONGEST_FIRST = ("family", "test_notebooks", "test_problem", "test_design_modes", "test_dynamics", "test_optimize",
-                  "test_design_invariant", "test_simulation_errors", "test_design_map", "test_effects",
+_LONGEST_FIRST = ("family", "test_notebooks", "test_problem", "test_design_map", "test_design_modes", "test_dynamics",
+                  "test_optimize", "test_design_invariant", "test_simulation_errors", "test_effects",
                   "test_design_body_data", "test_design_geometry", "test_bad_input", "test_design_mesh",
                   "test_design_filter", "test_design_elements", "test_notebooks_optimize")
 
