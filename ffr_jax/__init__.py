@@ -6,6 +6,7 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from . import cases as cases
+from ._errors import DesignError as DesignError, FFRJaxError as FFRJaxError, SimulationError as SimulationError, clean_errors as clean_errors, install_log_filter as _install_log_filter
 from ._api import objective as objective, simulate as simulate, simulate_case as simulate_case, value_and_grad as value_and_grad, value_and_grad_scene as value_and_grad_scene
 from ._case import Case as Case, FlexibleRodCase as FlexibleRodCase
 from ._design import (
@@ -74,3 +75,5 @@ from ._optimize._projection import HeavisideProjection as HeavisideProjection, b
 from ._optimize._plot import plot_constraints as plot_constraints, plot_design as plot_design, plot_history as plot_history
 from ._optimize._step import StepInfo as StepInfo, make_step as make_step
 from ._optimize._volume import VolumeConstraint as VolumeConstraint
+
+_install_log_filter()

@@ -3,12 +3,22 @@
 Each public function runs a module-level `equinox.filter_jit` program, so that it is compiled on
 its first call and reused for equal array shapes and static settings (like `diffrax.diffeqsolve`):
 calling `value_and_grad(case, x)` again with another design of the same shape does not recompile.
+So there is no need to wrap them in `jax.jit`; inside a larger compiled function of your own, see
+[`clean_errors`][] for how errors raised at run time read.
+
+Every public function checks its options (tolerances, step budget) before anything is traced, and
+a concrete design's values before the compiled program runs (a [`DesignError`][] at once); values
+known only inside the program (a design under `jax.vmap`, a dead point along the motion) raise
+there, and reach the caller as the package's [`DesignError`][] or [`SimulationError`][] with the
+message first ([`clean_errors`][]).
 """
 
 import diffrax
 import equinox as eqx
 
+from . import _checks
 from ._case import Case
+from ._errors import clean_errors
 from ._problem import Problem
 from ._scene._scene import Scene
 from ._sensitivity._adjoint import Adjoint
@@ -18,7 +28,7 @@ from ._sensitivity._base import AbstractSensitivity
 from ._sensitivity._direct import Direct
 from ._sensitivity._finite_differences import FiniteDifferences
 from ._simulate import Trajectory, simulate as simulate_redundant, solve_minimal
-from ._typing import Designs
+from ._typing import DesignsInput
 
 
 METHODS = {
@@ -57,6 +67,30 @@ def _check_target(target) -> None:
                          f"got {type(target).__name__}.")
 
 
+def _check_options(where: str, rtol, atol, max_steps) -> None:
+    """The solve options of a public function, before anything is traced."""
+    _checks.tolerances(rtol, atol, where)
+    _checks.max_steps(max_steps, where)
+
+
+def _design(case: Case, x, where: str):
+    """The design of a case, checked before the simulation is traced where its values are known.
+
+    A concrete design is checked on the host at once. A traced one goes through a small compiled
+    check first: under `jax.vmap` its values are known, so a bad batch fails there without
+    compiling the simulation; under a user's `jax.jit` the check becomes part of the program.
+    The simulation program checks the design again (it may be called on its own).
+    """
+    if x is None:
+        raise ValueError(f"{where}(case, x): a case needs its design x (e.g. case.initial_design(0.5)).")
+    return _checked_design(case, x) if _checks.is_traced(x) else case.check(x)
+
+
+@eqx.filter_jit
+def _checked_design(case, x):
+    return case.check(x)
+
+
 # --- compiled programs ------------------------------------------------------------------------
 @eqx.filter_jit
 def _simulate_problem(problem, solver, rtol, atol, ts, dense, max_steps, adjoint, dt0):
@@ -89,6 +123,7 @@ def _value_and_grad_scene(problem, scene, method, rtol, atol, solver, max_steps)
 
 
 # --- public functions -------------------------------------------------------------------------
+@clean_errors
 def simulate(target, *args, solver: diffrax.AbstractSolver | None = None, rtol: float = 1e-10, atol: float = 1e-12,
              ts=None, dense: bool = False, max_steps: int = 1_000_000, adjoint: diffrax.AbstractAdjoint | None = None,
              dt0: float | None = None, **kwargs) -> Trajectory:
@@ -108,6 +143,7 @@ def simulate(target, *args, solver: diffrax.AbstractSolver | None = None, rtol: 
     **Returns:** a [`Trajectory`][] with the independent and all redundant coordinates and
     velocities at the output times, and `psi`.
     """
+    _check_options("ffr_jax.simulate", rtol, atol, max_steps)
     if isinstance(target, Problem):
         if args or kwargs:
             raise ValueError("simulate(problem, ...) takes only keyword options (solver, rtol, atol, ts, ...).")
@@ -115,19 +151,23 @@ def simulate(target, *args, solver: diffrax.AbstractSolver | None = None, rtol: 
     if isinstance(target, Case):
         if len(args) != 1 or kwargs:
             raise ValueError("simulate(case, x, ...) takes the design x and keyword options.")
-        return _simulate_case(target, args[0], solver, rtol, atol, ts, dense, max_steps, adjoint)
+        return _simulate_case(target, _design(target, args[0], "simulate"), solver, rtol, atol, ts, dense, max_steps,
+                              adjoint)
     return simulate_redundant(target, *args, solver=solver, rtol=rtol, atol=atol, ts=ts, dense=dense,
                               max_steps=max_steps, adjoint=adjoint, dt0=dt0, **kwargs)
 
 
-def simulate_case(case: Case, x: Designs, *, rtol: float = 1e-10, atol: float = 1e-12,
+@clean_errors
+def simulate_case(case: Case, x: DesignsInput, *, rtol: float = 1e-10, atol: float = 1e-12,
                   solver: diffrax.AbstractSolver | None = None, ts=None, dense: bool = False,
                   max_steps: int = 1_000_000, adjoint: diffrax.AbstractAdjoint | None = None) -> Trajectory:
     """Simulate a case for design `x` with its objective integrated along (`simulate(case, x)`)."""
-    return _simulate_case(case, x, solver, rtol, atol, ts, dense, max_steps, adjoint)
+    _check_options("ffr_jax.simulate_case", rtol, atol, max_steps)
+    return _simulate_case(case, _design(case, x, "simulate_case"), solver, rtol, atol, ts, dense, max_steps, adjoint)
 
 
-def objective(target, x: Designs | None = None, *, rtol: float = 1e-10, atol: float = 1e-12,
+@clean_errors
+def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, atol: float = 1e-12,
               solver: diffrax.AbstractSolver | None = None, max_steps: int = 1_000_000):
     """`psi = G(t1) + int_{t0}^{t1} F dt` of a problem, or of a case at design `x`
     (REFERENCE_CASE §4: the integral compliance of the rod).
@@ -141,14 +181,17 @@ def objective(target, x: Designs | None = None, *, rtol: float = 1e-10, atol: fl
     **Returns:** scalar `psi`.
     """
     _check_target(target)
+    _check_options("ffr_jax.objective", rtol, atol, max_steps)
     if isinstance(target, Problem):
         if x is not None:
             raise ValueError("A Problem has no design vector: call objective(problem).")
         return _simulate_problem(target, solver, rtol, atol, None, False, max_steps, None, None).psi
-    return _simulate_case(target, x, solver, rtol, atol, None, False, max_steps, None).psi
+    return _simulate_case(target, _design(target, x, "objective"), solver, rtol, atol, None, False, max_steps,
+                          None).psi
 
 
-def value_and_grad(target, x: Designs | None = None, method: str | AbstractSensitivity = "adjoint", *,
+@clean_errors
+def value_and_grad(target, x: DesignsInput | None = None, method: str | AbstractSensitivity = "adjoint", *,
                    rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
                    max_steps: int = 200_000):
     """`(psi, grad psi)` of a case with respect to its design, or of a problem with respect to its arrays.
@@ -184,12 +227,15 @@ def value_and_grad(target, x: Designs | None = None, method: str | AbstractSensi
     ```
     """
     _check_target(target)
+    _check_options("ffr_jax.value_and_grad", rtol, atol, max_steps)
     if isinstance(target, Problem):
         problem, method = _problem_and_method(target, x, method)
         return _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps)
-    return _value_and_grad_design(target, x, sensitivity_method(method), rtol, atol, solver, max_steps)
+    method = sensitivity_method(method)
+    return _value_and_grad_design(target, _design(target, x, "value_and_grad"), method, rtol, atol, solver, max_steps)
 
 
+@clean_errors
 def value_and_grad_scene(target, scene: Scene, method: str | AbstractSensitivity = "adjoint", *,
                          rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
                          max_steps: int = 200_000):
@@ -198,5 +244,6 @@ def value_and_grad_scene(target, scene: Scene, method: str | AbstractSensitivity
     these parameters: a pytree like `scene`, `None` where a leaf is not a float array.
     """
     _check_target(target)
+    _check_options("ffr_jax.value_and_grad_scene", rtol, atol, max_steps)
     problem = target if isinstance(target, Problem) else target.problem
     return _value_and_grad_scene(problem, scene, sensitivity_method(method), rtol, atol, solver, max_steps)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import _cli_checks
 from ._io._cli import add_io_parsers
 from ._optimize._cli import add_optimize_parser
 
@@ -31,6 +32,7 @@ def _make_case(args):
 def _info(args) -> int:
     import jax
 
+    _cli_checks.case_options(args)
     case = _make_case(args)
     x = case.initial_design(args.value)
     t = time.perf_counter()
@@ -51,7 +53,10 @@ def _gradient(args) -> int:
     import jax
 
     import ffr_jax as fj
+    from ffr_jax._api import sensitivity_method
+    from ffr_jax._cacheable import cache_events, compile_value_and_grad
 
+    _cli_checks.gradient_options(args)
     case = _make_case(args)
     x = case.initial_design(args.value)
     method = args.method
@@ -65,18 +70,26 @@ def _gradient(args) -> int:
     print(f"slider-crank rod: {case.mesh.nx} x {case.mesh.ny} Q4 elements, {case.n_design} design variables, "
           f"x = {args.value}, {case.n_modes} modes, t1 = {case.t1} s; method {args.method}, "
           f"rtol {args.rtol:g}, atol {args.atol:g}")
-    fun = jax.jit(lambda x: fj.value_and_grad(case, x, method, rtol=args.rtol, atol=args.atol))
-    start = time.perf_counter()
-    compiled = fun.lower(x).compile()
-    compile_s = time.perf_counter() - start
+    # Compiled as programs the persistent cache can keep (a second run loads them instead of compiling).
+    events = cache_events()
+    directory = None if args.no_cache else cache_directory()
+    compiled, info = compile_value_and_grad(case, x, sensitivity_method(method), rtol=args.rtol, atol=args.atol,
+                                            export_dir=None if directory is None else directory / "programs")
+    compile_s = info["compile_s"]
+    compiled = fj.clean_errors(compiled)  # run-time errors with the package's message
     runs = []
     for _ in range(2):
         start = time.perf_counter()
         psi, grad = jax.block_until_ready(compiled(x))
         runs.append(time.perf_counter() - start)
     psi, grad = float(psi), np.asarray(grad)
+    cache = {k: v - events[k] for k, v in cache_events().items()}
+    if not (np.isfinite(psi) and np.all(np.isfinite(grad))):
+        raise RuntimeError(f"psi = {psi} or the gradient is not finite ({np.count_nonzero(~np.isfinite(grad))} "
+                           "entries); nothing is written. Tighten --rtol/--atol or report the case.")
     timings = {"compile_s": compile_s, "first_call_s": runs[0], "compile_and_first_call_s": compile_s + runs[0],
-               "second_call_s": runs[1]}
+               "second_call_s": runs[1], "persistent_cache": cache,
+               "traced_program_loaded": info["exported_loaded"]}
 
     print(f"psi = {psi:.10e}")
     row, col = np.unravel_index(np.argmax(np.abs(case.design_grid(grad))), (case.mesh.ny, case.mesh.nx - 2))
@@ -89,6 +102,8 @@ def _gradient(args) -> int:
               f"[{row['sign']}]")
     print(f"timings: compile {compile_s:.2f} s, compile + first call {timings['compile_and_first_call_s']:.2f} s, "
           f"second call {runs[1]:.3f} s")
+    print(f"compilation cache: scene-gradient program {'loaded' if info['exported_loaded'] else 'traced'}; "
+          f"XLA programs: {cache['cache_hits']} loaded, {cache['cache_misses']} compiled")
 
     if args.json is not None:
         record = {
@@ -102,7 +117,8 @@ def _gradient(args) -> int:
             "atol": args.atol,
             "grid_shape": [case.mesh.ny, case.mesh.nx - 2],
         }
-        Path(args.json).write_text(json.dumps(record, indent=1))
+        text = json.dumps(_cli_checks.finite_record(record, f"--json {args.json}"), indent=1, allow_nan=False)
+        Path(args.json).write_text(text)
         print(f"wrote {args.json}")
     if args.plot is not None:
         figure = fj.plot_gradient(case, grad, title=f"dpsi/dx ({args.method}), {case.mesh.nx} x {case.mesh.ny} rod, "
@@ -189,7 +205,9 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (ValueError, RuntimeError) as err:
-        print(f"ffr-jax: error: {err}", file=sys.stderr)
+        from ._errors import package_error
+
+        print(f"ffr-jax: error: {package_error(err) or err}", file=sys.stderr)
         return 2
 
 

@@ -21,6 +21,7 @@ import jax.tree_util as jtu
 import numpy as np
 import scipy.linalg
 
+from ._errors import SimulationError, branched_error_if
 from ._scene._scene import Scene
 from ._small_linalg import lu_factor, lu_solve, matmul, spd_solve
 
@@ -119,10 +120,14 @@ class MinimalModel(eqx.Module):
     - `newton_unrolled`: the first iterations are unrolled (no loop), the rest run in a loop that
       stops at convergence. With a good `dependent_guess` Newton converges within the unrolled
       iterations and the loop ends at once; unrolled iterations after convergence only refine.
+    - `reference_conditioning`: the Hadamard ratio [`hadamard_ratio`][] of `C_d` at the initial
+      state (set by [`Problem`][]); along the motion a ratio below `DEAD_POINT_RATIO` times it
+      (or below 1e-9 without a reference) is a dead point, an error.
     """
 
     partition: Partition
     reference_dependent: jnp.ndarray
+    reference_conditioning: jnp.ndarray | None = None
     dependent_guess: Callable | None = eqx.field(static=True, default=None)
     newton_iterations: int = eqx.field(static=True, default=25)
     newton_tol: float = eqx.field(static=True, default=1e-13)
@@ -236,10 +241,27 @@ class MinimalModel(eqx.Module):
         return z, self.state_and_accelerations(t, y, z, scene)[2]
 
 
+# A dead point is where C_d (the constraint Jacobian with respect to the dependent coordinates)
+# is singular: there the constraints have a double root, which Newton's method approaches only
+# linearly and stalls ~sqrt(eps) ~ 1e-8 (relative) away from, with a residual at round-off level.
+# The test is on the Hadamard ratio of C_d relative to its value at the start (scale-free, and free
+# of the units of the coordinates). Measured on the slider-crank family (4 x 2 and 12 x 2 rods, the
+# crank at full speed; benchmarks/RESULTS.md, "Bad input"): regular motions keep the ratio above 0.2
+# (eccentricity 0.98 l) and above 6e-3 for a rigid rod at 0.99999 l; a flexible rod pulled through
+# the dead point drops below 1e-5 within a few steps of approaching it, then the step size collapses
+# to 1e-15 s while the ratio stalls at 1e-8..3e-9 (before this test, the step budget ran out there).
+# 1e-5 sits between the two by three decades each way.
+DEAD_POINT_RATIO = 1e-5
+
 _SINGULAR = (
-    "The coordinate partition became singular: the constraint Jacobian with respect to the "
-    "dependent coordinates lost rank along the motion (e.g. a linkage at a dead point). "
-    "Choose another partition (MinimalModel(partition=...)), or stop the simulation earlier."
+    "Dead point: the coordinate partition became singular along the motion. The constraint Jacobian "
+    "with respect to the dependent coordinates, C_d, lost rank (its Hadamard ratio |det C_d| / prod |rows| "
+    "fell below 1e-5 of its value at the start): the mechanism reached a configuration where the "
+    "dependent coordinates are no function of the independent ones (e.g. a slider-crank whose rod "
+    "stands upright because the crank eccentricity is too close to the rod length, or a flexible rod "
+    "compressed through that position). Change the geometry (for the slider-crank an eccentricity well "
+    "below the rod length, e.g. <= 0.98 l), choose another partition (Problem(partition=...)), or end the "
+    "simulation before that time."
 )
 _NOT_CONVERGED = (
     "Newton's method for the dependent coordinates did not converge: the position constraints "
@@ -291,10 +313,20 @@ def _newton(model: MinimalModel, t, y, scene: Scene):
     # not a singular partition: NaN fails `hadamard <= ...` and the residual test below catches it.
     scale = 1.0 + jnp.max(jnp.abs(model.assemble(y, y_d)))
     singular = hadamard <= 1e-9
+    if model.reference_conditioning is not None:
+        singular = singular | (hadamard <= DEAD_POINT_RATIO * model.reference_conditioning)
     not_converged = ~(jnp.max(jnp.abs(residual(y_d))) <= 1e-9 * scale)
-    return eqx.branched_error_if(
-        y_d, singular | not_converged, jnp.where(singular, 0, 1), (_SINGULAR, _NOT_CONVERGED)
+    return branched_error_if(
+        y_d, singular | not_converged, jnp.where(singular, 0, 1), (_SINGULAR, _NOT_CONVERGED), SimulationError
     )
+
+
+def hadamard_ratio(matrix) -> float:
+    """`|det A| / prod_i |row_i(A)|` in `[0, 1]` of a square matrix (NumPy): 1 for orthogonal rows, 0 when singular;
+    unchanged by scaling a row."""
+    matrix = np.asarray(matrix, dtype=float)
+    norms = np.prod(np.linalg.norm(matrix, axis=1))
+    return float(abs(np.linalg.det(matrix)) / norms) if norms > 0 else 0.0
 
 
 @eqx.filter_custom_jvp

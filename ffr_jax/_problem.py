@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._model import MinimalModel, Partition, choose_partition
+from ._model import MinimalModel, Partition, _constraint_jacobian, choose_partition, hadamard_ratio
 from ._objective._objective import Objective, as_objective
 from ._scene._scene import Scene
 
@@ -99,7 +99,13 @@ class Problem(eqx.Module):
         y_r0, z_r0 = _assemble(model, scene, t0, jnp.asarray(y0), jnp.asarray(z0))
         if redundant_velocities is not None:
             _check_velocities(model, scene, z_r0, redundant_velocities)
-        model = eqx.tree_at(lambda m: m.reference_dependent, model, jnp.asarray(_split(partition, y_r0)[1]))
+        # The conditioning of C_d at the start: the reference of the dead-point test along the motion.
+        conditioning = None
+        if partition.dependent:
+            c = np.asarray(_constraint_jacobian(scene, jnp.asarray(t0, float), jnp.asarray(y_r0)))
+            conditioning = jnp.asarray(hadamard_ratio(c[:, list(partition.dependent)]))
+        model = MinimalModel(partition=partition, reference_dependent=jnp.asarray(_split(partition, y_r0)[1]),
+                             dependent_guess=dependent_guess, reference_conditioning=conditioning)
         y0, z0 = jnp.asarray(y0), jnp.asarray(z0)
         self.scene, self.model = scene, model
         self.objective = as_objective(objective)

@@ -15,24 +15,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
+from helpers import FD_ATOL, FD_RTOL, adjoint_value_and_grad, central_difference, tight_objective  # noqa: F401
 
 import ffr_jax
 
-# Forward tolerances of the finite-difference evaluations: two decades below the gradient's
-# forward tolerance (1e-10), so that the difference quotient is not dominated by solver noise.
-FD_RTOL, FD_ATOL = 1e-12, 1e-14
-
-
-@eqx.filter_jit
-def adjoint_value_and_grad(case, x):
-    """`(psi, grad psi)` by the paper's adjoint method, compiled once per case structure."""
-    return ffr_jax.value_and_grad(case, x, "adjoint")
-
-
-@eqx.filter_jit
-def tight_objective(case, x):
-    """`psi(x)` at the tight tolerances of the finite-difference checks, compiled once per structure."""
-    return ffr_jax.objective(case, x, rtol=FD_RTOL, atol=FD_ATOL)
+# The compiled programs (`adjoint_value_and_grad`, `tight_objective`) live in `helpers.py`, shared
+# with the other test modules; the finite-difference evaluations run at FD_RTOL = 1e-12, two
+# decades below the gradient's forward tolerance (1e-10), so that the difference quotient is not
+# dominated by solver noise.
 
 
 def variant(base: ffr_jax.FlexibleRodCase, other: ffr_jax.FlexibleRodCase) -> ffr_jax.FlexibleRodCase:
@@ -140,15 +130,6 @@ def void_design(case, seed: int = 0):
 
 
 # --- checks ----------------------------------------------------------------------------------------
-
-
-def central_difference(f, h: float):
-    """Fourth-order central difference of a scalar function of one real at 0 (four evaluations).
-
-    Second order is not enough next to low densities: `E ~ x^3` and `rho ~ x^6` make the third
-    derivative of `psi` large, and a two-point quotient with `h = 1e-4` is off by ~1e-5 there.
-    """
-    return (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h)
 
 
 def one_sided_difference(f, h: float):

@@ -9,9 +9,10 @@ from helpers import small_case
 
 import ffr_jax
 
-# eqx.error_if raises EquinoxRuntimeError eagerly and under eqx.filter_jit, and a
-# jax.errors.JaxRuntimeError carrying the same message under jax.jit; both are RuntimeErrors.
-RUNTIME_ERRORS = (eqx.EquinoxRuntimeError, RuntimeError)
+# A concrete design is checked on the host at once (ffr_jax.DesignError, a ValueError); a traced one
+# by eqx.error_if, which raises EquinoxRuntimeError under eqx.filter_jit and a
+# jax.errors.JaxRuntimeError carrying the same message under jax.jit (both RuntimeErrors).
+RUNTIME_ERRORS = (ffr_jax.DesignError, eqx.EquinoxRuntimeError, RuntimeError)
 CALLS = {"eager": lambda f: f, "filter_jit": eqx.filter_jit, "jit": lambda f: jax.jit(lambda x: f(x))}
 
 

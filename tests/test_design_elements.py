@@ -66,8 +66,20 @@ def test_simp_law():
     low = 1e5 * x**6 * 8750.0
     np.testing.assert_allclose(simp.densities(x), jnp.where(x < 0.1, low, x * 8750.0), rtol=ROUNDOFF)
     np.testing.assert_allclose(simp.youngs(x), x**3 * 0.5e11, rtol=ROUNDOFF)
-    below, above = simp.densities(jnp.array([0.1 - 1e-9, 0.1]))
-    np.testing.assert_allclose(below, above, rtol=1e-7, err_msg="density continuity at x = 0.1")
+    # Continuity at the switch: the two branches meet there (c 0.1^q = 1e5 1e-6 = 0.1), and just below it
+    # the density is rho(0.1) less its first-order change, q c 0.1^(q-1) rho0 h = 6 rho0 h, to within the
+    # second-order term (at most rho''(0.1) h^2 / 2 = 15 c 0.1^4 rho0 h^2 = 150 rho0 h^2, rho'' growing
+    # with x) and the round-off of two evaluations of size 0.1 rho0 (8 ulps of that; measured: deviation
+    # 1.6e-12 against the bound's 2.9e-12). A jump would be a fraction of 0.1 rho0 (~1e2).
+    # (Before: `rtol=1e-7` on the two values, which a jump of 1e-7 rho0 passed.)
+    np.testing.assert_allclose(simp.mass_factor * 0.1**simp.mass_penalty, 0.1, rtol=ROUNDOFF,
+                               err_msg="the two branches of eq. 47 meet at x = 0.1")
+    x_below = 0.1 - 1e-9
+    h = 0.1 - x_below  # exact (Sterbenz), the step actually taken
+    below, above = (float(v) for v in simp.densities(jnp.array([x_below, 0.1])))
+    rho0, ulp = simp.density, np.finfo(float).eps * 0.1 * simp.density
+    np.testing.assert_allclose(below, above - 6 * rho0 * h, rtol=0, atol=150 * rho0 * h**2 + 8 * ulp,
+                               err_msg="density continuity at x = 0.1 (first-order change only)")
 
 
 @pytest.mark.parametrize("element", ELEMENTS, ids=IDS)

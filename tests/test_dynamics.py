@@ -13,6 +13,7 @@ which the minimal-coordinate model (coordinate partitioning) must reproduce.
 
 import functools
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -147,11 +148,16 @@ class MeshSystem:
 X_VALUE = 0.5
 
 
+def _scene(case, x):
+    """`case.scene(x)` as one compiled program (eagerly, the FE and modal pipeline compiles op by op)."""
+    return eqx.filter_jit(case.scene)(x)
+
+
 @functools.cache
 def pendulum():
     case = ffr_jax.cases.flexible_pendulum(10, 2, 3, t1=2.0)
     x = case.initial_design(X_VALUE)
-    scene = case.scene(x)
+    scene = _scene(case, x)
     return case, scene, MeshSystem(scene, [rod_mesh_body(case, x)], g=(0.0, -9.81))
 
 
@@ -159,7 +165,7 @@ def pendulum():
 def slider_crank():
     case = ffr_jax.cases.slider_crank(10, 2, 3, t1=0.4, t_ramp=0.4, speed=8 * np.pi)
     x = case.initial_design(X_VALUE)
-    scene = case.scene(x)
+    scene = _scene(case, x)
     return case, scene, MeshSystem(scene, [rod_mesh_body(case, x)])
 
 
@@ -167,7 +173,7 @@ def slider_crank():
 def four_bar():
     case = ffr_jax.cases.four_bar(10, 2, 3, t1=0.5, t_ramp=0.25, speed=8 * np.pi)
     x = case.initial_design(X_VALUE)
-    scene = case.scene(x)
+    scene = _scene(case, x)
     crank, _, rocker = (b.data for b in scene.bodies)
     return case, scene, MeshSystem(scene, [bar_mesh_body(crank), rod_mesh_body(case, x), bar_mesh_body(rocker)])
 
@@ -362,7 +368,8 @@ def test_rigid_slider_crank_matches_closed_form_kinematics():
     assert float(jnp.max(jnp.abs(y_r[:, 6] - expected))) <= KINEMATICS_TOL
     assert float(jnp.max(jnp.abs(y_r[:, 7]))) <= KINEMATICS_TOL, "the slider leaves the x-axis"
     # The same case simulates (its minimal state is empty) and reproduces the motion.
-    traj = ffr_jax.simulate(model, scene, case.t0, case.t1, case.y_r0, case.z_r0, ts=ts[::50], jump_ts=case.jump_ts)
+    traj = eqx.filter_jit(ffr_jax.simulate)(model, scene, case.t0, case.t1, case.y_r0, case.z_r0, ts=ts[::50],
+                                            jump_ts=case.jump_ts)
     y_sim = jax.jit(jax.vmap(lambda t, y: model.positions(t, y, scene)))(traj.ts, traj.ys)
     np.testing.assert_allclose(y_sim, y_r[::50], atol=KINEMATICS_TOL)
 

@@ -1,10 +1,11 @@
 """Hard cases (issue 6): each gives a finite adjoint gradient that agrees with finite differences,
 or, where the mechanism cannot be simulated, a clear error instead of a number.
 
-Cases of one structure (12 x 2 mesh, 4 modes, t1 = 0.15 s with a 0.05 s crank run-up) share one
-compiled adjoint gradient and one compiled objective (see `hard_cases.variant`); the coarse mesh
-is a second structure. The costly members (20 modes, a fine mesh, t1 = 30 s, the dead-point
-limit reached during the motion) are marked `slow` and are rows of `benchmarks/bench_hard_cases.py`.
+Cases of one structure (`helpers.FAMILY`: 12 x 2 mesh, 4 modes, t1 = 0.15 s with a 0.05 s crank
+run-up) share one compiled adjoint gradient and one compiled objective with the other test modules
+(see `hard_cases.variant`). The members of other structures, each costing compilations of its own
+(a very coarse mesh over two crank turns, 20 modes, a fine mesh, t1 = 30 s) are marked `slow` and
+are rows of `benchmarks/bench_hard_cases.py`.
 
 The comparison is with central differences of `psi` evaluated at rtol 1e-12 (a directional
 derivative along a random direction and the largest gradient entry; one-sided at `x_min`), in
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 from hard_cases import (adjoint_value_and_grad, agreement, crossing_design, gradient_checks, tight_objective,
                         variant, void_design)
+from helpers import FAMILY, small_case, uniform_design
 
 import ffr_jax
 
@@ -25,7 +27,7 @@ import ffr_jax
 AGREEMENT_RTOL = 1e-6
 RUNTIME_ERRORS = (eqx.EquinoxRuntimeError, RuntimeError)
 
-BASE = dict(nx=12, ny=2, n_modes=4, t1=0.15, t_ramp=0.05)
+BASE = FAMILY
 
 
 def slider_crank(**changes):
@@ -35,7 +37,9 @@ def slider_crank(**changes):
 
 @pytest.fixture(scope="module")
 def base():
-    return slider_crank()
+    # The process-wide family member: its static parts (the partition's guess function, ...) are the
+    # ones the shared compiled programs were built for, so these run without recompiling.
+    return small_case()
 
 
 def assert_gradient_agrees(case, x, **check_options):
@@ -69,7 +73,7 @@ def test_void_regions_at_x_min(base):
 
 
 def test_crank_speed_at_first_resonance(base):
-    x = base.initial_design(0.5)
+    x = uniform_design(base)
     first = float(base.frequencies(x)[0])
     resonant = variant(base, slider_crank(speed=2 * np.pi * first))
     static = float(tight_objective(base, x))
@@ -81,7 +85,7 @@ def test_near_dead_point(base):
     # eps / l = 0.98: at phi = pi/2 the rod stands at 78.5 degrees and the slider's constraint
     # Jacobian with respect to theta is l cos(theta) = 0.2 l.
     near = variant(base, slider_crank(eccentricity=0.98))
-    assert_gradient_agrees(near, base.initial_design(0.5))
+    assert_gradient_agrees(near, uniform_design(base))
 
 
 def test_dead_point_reached_is_a_clear_error():
@@ -90,15 +94,15 @@ def test_dead_point_reached_is_a_clear_error():
         slider_crank(eccentricity=1.0)
 
 
-@pytest.mark.slow
 def test_dead_point_limit_during_motion_is_a_clear_error(base):
     # eps / l = 0.99 at full speed: the flexible rod is pulled through the dead point; the
     # simulation stops with the partition check (or Newton's) rather than returning a number.
     beyond = variant(base, slider_crank(eccentricity=0.99))
     with pytest.raises(RUNTIME_ERRORS, match="partition became singular|did not converge"):
-        adjoint_value_and_grad(beyond, base.initial_design(0.5))
+        adjoint_value_and_grad(beyond, uniform_design(base))
 
 
+@pytest.mark.slow  # a structure of its own (two compilations, ~25 s); a row of benchmarks/bench_hard_cases.py
 def test_coarse_mesh_longer_horizon():
     # 4 x 2 elements (4 design variables), 3 modes, 0.4 s: nearly three times the base horizon,
     # two crank turns; every entry against finite differences. Stand-in for t1 = 30 s (slow below).

@@ -15,7 +15,7 @@ import ffr_jax
 @pytest.fixture(scope="module")
 def pendulum():
     case = ffr_jax.cases.flexible_pendulum(6, 2, 2, t1=0.05)
-    return case, case.scene(case.initial_design(0.5))
+    return case, eqx.filter_jit(case.scene)(case.initial_design(0.5))
 
 
 def _simulate(case, scene, y_r0=None, z_r0=None, **kwargs):
@@ -83,7 +83,8 @@ def test_singular_partition_is_an_error_not_a_nan():
     dead = jnp.asarray(_assembled(0.0)[np.asarray(case.model.partition.dependent)])
     case = eqx.tree_at(lambda c: c.model.reference_dependent, case, dead)
     with pytest.raises(eqx.EquinoxRuntimeError, match="coordinate partition became singular"):
-        case.model.dependent_positions(jnp.asarray(0.0), jnp.array([ECC + LENGTH]), case.scene)
+        # (Compiled as one program: eagerly, the checks compile op by op.)
+        eqx.filter_jit(case.model.dependent_positions)(jnp.asarray(0.0), jnp.array([ECC + LENGTH]), case.scene)
 
 
 def test_partition_regular_away_from_the_dead_point():

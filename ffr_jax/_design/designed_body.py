@@ -63,7 +63,7 @@ class DesignedBody(eqx.Module):
 
     def initial_design(self, value: float = 0.5):
         """A uniform design `x_e = value`, `(n_design,)`."""
-        if not self.material.x_min <= value <= 1.0:
+        if not self.material.x_min <= float(value) <= 1.0:
             raise ValueError(f"Design value {value} lies outside [x_min, 1] = [{self.material.x_min}, 1].")
         return self.domain.initial_design(value)
 

@@ -5,6 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from .._checks import design_array, design_values, is_traced
+from .._errors import DesignError, error_if
 from .mesh import QuadMesh, StructuredGrid, _format_ids
 
 DESIGN, SOLID, VOID = 0, 1, 2
@@ -103,24 +105,29 @@ class DesignDomain(eqx.Module):
         return jnp.full((self.n_design,), float(value))
 
     def check(self, x, x_min: float, body: str | None = None) -> Float[Array, " n_design"]:
-        """Validate a design: shape at trace time; NaN and the bounds `[x_min, 1]` at run time.
+        """Validate a design and return it as float64: dtype and shape at trace time, values (NaN,
+        inf, bounds `[x_min, 1]`) at once when `x` is concrete, else at run time. Raises
+        [`DesignError`][] (complex numbers refused; integers and float32 converted to float64).
 
         `body` (optional) names the body in the messages.
         """
         of_body = "" if body is None else f" for body {body!r}"
-        x = jnp.asarray(x)
+        x = design_array(x, of_body)
         if x.shape != (self.n_design,):
-            raise ValueError(
+            raise DesignError(
                 f"Design vector has shape {x.shape}, expected ({self.n_design},){of_body}: one density per design "
                 f"element ({self.mesh.n_elements} elements, {self.mesh.n_elements - self.n_design} passive). "
                 "Use initial_design(value) for a valid vector."
             )
-        if not jnp.issubdtype(x.dtype, jnp.floating):
-            x = x.astype(float)
-        x = eqx.error_if(x, jnp.any(jnp.isnan(x)), f"Design vector contains NaN{of_body}.")
-        return eqx.error_if(
+        if not is_traced(x):
+            design_values(x, x_min, of_body)
+            return x
+        x = error_if(x, ~jnp.all(jnp.isfinite(x)), f"Design vector contains NaN or inf{of_body}; every density must "
+                     f"be a finite number in [x_min, 1] = [{x_min}, 1].", DesignError)
+        return error_if(
             x, jnp.any((x < x_min) | (x > 1.0)),
             f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; clip or project the design first.",
+            DesignError,
         )
 
     def element_densities(self, x, x_min: float) -> Float[Array, " n_elements"]:

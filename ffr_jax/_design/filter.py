@@ -60,14 +60,15 @@ class DensityFilter(eqx.Module):
         if not isinstance(domain, DesignDomain):
             raise TypeError(f"DensityFilter takes a DesignDomain or a DesignedBody (e.g. case.design), got "
                             f"{type(domain).__name__}.")
-        if not radius >= 0.0:
-            raise ValueError(f"The filter radius must be non-negative, got {radius}; radius=0 means no filtering.")
+        if not (radius >= 0.0 and np.isfinite(radius)):
+            raise ValueError(f"The filter radius must be a finite non-negative number of element sizes, got {radius}; "
+                             "radius=0 means no filtering (1.5 takes the 8 nearest neighbours on a grid).")
         centres, areas = domain.design_centroids(), domain.design_areas()
         if scale is None:
             mesh = domain.mesh
             scale = (mesh.dx, mesh.dy) if isinstance(mesh, StructuredGrid) else (np.sqrt(np.mean(areas)),) * 2
         scale = np.asarray(scale, dtype=float)
-        if scale.shape != (2,) or not np.all(scale > 0):
+        if scale.shape != (2,) or not np.all((scale > 0) & np.isfinite(scale)):
             raise ValueError(f"scale must be two positive lengths (sx, sy), got {scale}.")
         centres = centres / scale
         n = centres.shape[0]

@@ -90,16 +90,20 @@ def _fsync_directory(directory: Path) -> None:
         os.close(fd)
 
 
-def load_checkpoint(path) -> Checkpoint:
-    """Read a checkpoint written by [`save_checkpoint`][], checking that it is whole.
+def load_checkpoint(path, design_bounds: tuple[float, float] = (0.0, 1.0)) -> Checkpoint:
+    """Read a checkpoint written by [`save_checkpoint`][], checking that it is whole and its values sound.
 
     **Arguments:**
     - `path`: the checkpoint file.
+    - `design_bounds`: `(x_min, 1)` of the run's densities (default `(0, 1)`, which holds for every
+      density design).
 
     **Returns:** the [`Checkpoint`][].
 
     **Raises:** [`CheckpointError`][] if the file is missing, unreadable, truncated, fails its
-    CRC checks, or lacks an entry.
+    CRC checks, lacks an entry, or holds values no run can have written: a design with NaN, inf
+    or a density outside `design_bounds`, an optimizer state or history with NaN or inf, or a
+    negative integer (step count) in the optimizer state.
     """
     path = Path(path)
     if not path.is_file():
@@ -129,7 +133,38 @@ def load_checkpoint(path) -> Checkpoint:
             f"Checkpoint {path} is corrupt or incomplete ({type(err).__name__}: {err}). "
             "It cannot be resumed; start a new run."
         ) from err
+    _check_values(path, x, leaves, history, design_bounds)
     return Checkpoint(iteration, x, leaves, history, config)
+
+
+def _check_values(path: Path, x, leaves, history: History, design_bounds) -> None:
+    """The stored numbers are those of a sound run, or a [`CheckpointError`][] naming the file and the entry."""
+    lo, hi = design_bounds
+
+    def refuse(what: str) -> None:
+        raise CheckpointError(f"Checkpoint {path} holds {what}, which no run writes: the file was altered or "
+                              "written by a run that had failed. It cannot be resumed; start a new run (or resume "
+                              "an earlier copy of the directory).")
+
+    if not np.issubdtype(x.dtype, np.floating):
+        refuse(f"a design of dtype {x.dtype}")
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size:
+        refuse(f"a design with NaN or inf (entry x[{bad[0]}] and {bad.size - 1} more)")
+    bad = np.flatnonzero((x < lo) | (x > hi))
+    if bad.size:
+        refuse(f"a design with densities outside [{lo}, {hi}] (x[{bad[0]}] = {x[bad[0]]:g}, {bad.size} in all)")
+    for i, leaf in enumerate(leaves):
+        if np.issubdtype(leaf.dtype, np.inexact) and not np.all(np.isfinite(leaf)):
+            refuse(f"NaN or inf in optimizer state array {i}")
+        if np.issubdtype(leaf.dtype, np.integer) and np.any(leaf < 0):
+            refuse(f"a negative count in optimizer state array {i}")
+    for name in ("value", "change", "constraints"):
+        values = getattr(history, name)
+        if values is not None and not np.all(np.isfinite(values)):
+            refuse(f"NaN or inf in the history ({name})")
+    if np.any(np.isinf(history.volume)):  # NaN is the volume of a run without a volume constraint
+        refuse("inf in the history (volume)")
 
 
 def restore_opt_state(leaves, like):

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .._api import METHODS
+from .._cli_checks import optimize_options
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
 
@@ -144,6 +145,7 @@ def _run(args: argparse.Namespace) -> int:
     import ffr_jax as fj
 
     directory, s, stored = _settings(args)
+    optimize_options(s, args, directory, resume=args.resume is not None)
     # Runs stored before a setting existed resume with its default (and keep their stored config).
     config = {key: value for key, value in s.items() if key in stored or value != _DEFAULTS.get(key)}
     if s["beta"] < 0.0:

@@ -12,6 +12,7 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import optional_integer, tolerances
 from .._problem import Problem
 from .._simulate import solve_minimal
 from .._small_linalg import lu_factor, lu_solve, matmul, spd_solve
@@ -319,6 +320,8 @@ class Adjoint(AbstractSensitivity):
     max_steps: int | None = None
 
     def __check_init__(self):
+        tolerances(self.rtol, self.atol, "Adjoint (the backward solve)")
+        optional_integer(self.max_steps, "Adjoint(max_steps=...)")
         if self.quadrature is not None and (isinstance(self.quadrature, bool) or not isinstance(self.quadrature, int)
                                             or self.quadrature < 1):
             raise ValueError(f"Adjoint(quadrature=...) must be a positive number of Gauss–Legendre nodes "

@@ -3,6 +3,7 @@
 import diffrax
 import equinox as eqx
 
+from .._checks import optional_integer
 from ._base import AbstractSensitivity, parameters, problem_gradient, psi_of, with_parameters
 
 
@@ -14,6 +15,9 @@ class Autodiff(AbstractSensitivity):
     """
 
     checkpoints: int | None = None
+
+    def __check_init__(self):
+        optional_integer(self.checkpoints, "Autodiff(checkpoints=...)")
 
     def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
         adjoint = diffrax.RecursiveCheckpointAdjoint(checkpoints=self.checkpoints)

@@ -3,6 +3,7 @@
 import diffrax
 import equinox as eqx
 
+from .._checks import tolerances
 from ._base import AbstractSensitivity, parameters, problem_gradient, psi_of, with_parameters
 
 
@@ -18,6 +19,9 @@ class Backsolve(AbstractSensitivity):
 
     rtol: float = 1e-8
     atol: float = 1e-10
+
+    def __check_init__(self):
+        tolerances(self.rtol, self.atol, "Backsolve (the backward solve)")
 
     def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
         controller = diffrax.PIDController(rtol=self.rtol, atol=self.atol)

@@ -6,6 +6,7 @@ import jax
 import jax.flatten_util
 import jax.numpy as jnp
 
+from .._checks import optional_integer
 from ._base import AbstractSensitivity, parameters, problem_gradient, psi_of, with_parameters
 
 
@@ -17,6 +18,9 @@ class Direct(AbstractSensitivity):
     """
 
     chunk: int | None = None
+
+    def __check_init__(self):
+        optional_integer(self.chunk, "Direct(chunk=...)")
 
     def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
         dyn, static = eqx.partition(parameters(problem), eqx.is_inexact_array)

@@ -9,6 +9,7 @@ from .._design.designed_body import DesignedBody
 from .._design.material import SIMP
 from .._design.modal.auto import AutoModes
 from .._design.modal.base import AbstractModalSolver
+from .._checks import integer, number, positive
 from .._objective._compliance import Compliance
 from .._problem import Problem
 from .._scene._body import Body
@@ -32,7 +33,7 @@ def slider_crank_guess(t, y, scene):
 
 
 def _check_eccentricity(eccentricity: float, length: float) -> None:
-    if not 0 < eccentricity < length:
+    if not 0 < number(eccentricity, "slider_crank(eccentricity=...)") < length:
         raise ValueError(
             f"The crank eccentricity must lie in (0, l) = (0, {length}) for the slider–crank to assemble "
             f"at every crank angle, got {eccentricity}."
@@ -79,10 +80,19 @@ def slider_crank(
     **Returns:** a [`Case`][]: the [`Problem`][] with the rod's compliance as objective and a
     [`DesignMap`][] of the rod (`case.design` is its [`DesignedBody`][], see [`rod_body`][]).
     """
+    # Every number is checked before anything is computed (the rod's modes compile first).
+    t1 = positive(t1, "slider_crank(t1=...)", "It is the end time in s.")
+    t_ramp = positive(t_ramp, "slider_crank(t_ramp=...)", "It is the run-up time of the crank in s.")
+    speed = number(speed, "slider_crank(speed=...)")
     if rod is None:
+        for name, value in (("nx", nx), ("ny", ny), ("n_modes", n_modes)):
+            integer(value, f"slider_crank({name}=...)", 1)
+        length = positive(length, "slider_crank(length=...)")
+        positive(height, "slider_crank(height=...)")
+        positive(thickness, "slider_crank(thickness=...)")
+        if not isinstance(material, SIMP):
+            raise ValueError(f"material must be an ffr_jax.SIMP, got {type(material).__name__}.")
         _check_eccentricity(eccentricity, length)
-    if t1 <= 0:
-        raise ValueError(f"t1 must be positive, got {t1}.")
     body = rod if rod is not None else rod_body(nx, ny, n_modes, length=length, height=height,
                                                 thickness=thickness, material=material, modal_solver=modal_solver)
     rod = Body("rod", body.uniform_body_data())

@@ -1,0 +1,357 @@
+"""The bad inputs of issue 17, as data: each one call of the public API or one `ffr-jax` command line,
+the error it must raise and where it is caught.
+
+Shared by `tests/test_bad_input_fuzz.py` (which asserts every row) and `benchmarks/bench_bad_input.py`
+(which times every row and writes the "Bad input" table of benchmarks/RESULTS.md), so that both
+check exactly the same list. Adding a case is one line in `API` or `CLI`.
+
+Every call runs on one small slider-crank (`Ctx.case`: a 4 x 2 rod, 2 modes, 0.1 s with a 0.05 s
+run-up, so that the crank passes phi = pi/2 at full speed, where this rod with a crank of 0.99 l or
+longer is pulled through its dead point). Most
+inputs are refused before anything is traced; the few that need a compiled program (a dead point
+reached along the motion) share the case's structure, so one compiled forward solve serves them, and
+one compiled finite-difference program (`Ctx.gradient`) serves the batched rows and the tests of
+finite differences at the bounds; a
+bad design under a user's `jax.jit` runs in the (cheap) jitted modal solve of the case.
+"""
+
+import contextlib
+import io
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import ffr_jax as fj
+
+NAN, INF = float("nan"), float("inf")
+# The small case: nx, ny, n_modes, t1 and the run-up time.
+SMALL = dict(nx=4, ny=2, n_modes=2, t1=0.1, t_ramp=0.05)
+
+
+def slider_crank(**changes):
+    args = {**SMALL, **changes}
+    return fj.cases.slider_crank(args.pop("nx"), args.pop("ny"), args.pop("n_modes"), args.pop("t1"), **args)
+
+
+def variant(base, other):
+    """The array values of `other` in the static structure of `base` (one compiled program for both)."""
+    arrays = jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(eqx.filter(base, eqx.is_array)),
+                                          jax.tree_util.tree_leaves(eqx.filter(other, eqx.is_array)))
+    return eqx.combine(arrays, eqx.filter(base, eqx.is_array, inverse=True))
+
+
+@dataclass
+class Ctx:
+    """What the calls share: the small case, its uniform design, a user's jitted objective, a scratch directory."""
+
+    tmp: Path
+    case: Any = None
+    x: Any = None
+    jitted: Any = None
+
+    def __post_init__(self):
+        self.case = slider_crank()
+        self.x = self.case.initial_design(0.5)
+        # A user's own jax.jit around a function of the package. The design check that fails in it is the
+        # first step of every design program (objective, gradients, modes), so the cheapest one serves:
+        # the modes (a jitted objective costs a second compilation of the forward solve).
+        case = self.case
+        self.jitted = jax.jit(lambda x: case.frequencies(x))
+
+    def fd(self, x, **options):
+        return fj.value_and_grad(self.case, x, fj.FiniteDifferences(**options))
+
+    # The finite differences of three entries: one compiled program (seven forward solves in one batch)
+    # that serves the dead-point rows (its first solve stops there) and the tests of finite
+    # differences at the bounds, so that the module compiles the forward solve only once.
+    FD = fj.FiniteDifferences(step=1e-4, entries=(0, 1, 2), batch_size=7)
+
+    def gradient(self, case, x):
+        return fj.value_and_grad(case, x, self.FD)
+
+    def checkpoint(self, name: str, x=None, leaves=(), history=None) -> Path:
+        """A run directory `tmp/name` holding a checkpoint of the small CLI run with the given values."""
+        directory = self.tmp / name
+        directory.mkdir(exist_ok=True)
+        n_design = 2 * (4 - 2)  # the CLI runs below use --nx 4 --ny 2 (as the small case)
+        x = np.full(n_design, 0.5) if x is None else np.asarray(x, dtype=float)
+        history = fj.History(np.ones(1), np.full(1, 0.5), np.full(1, 0.01)) if history is None else history
+        config = {"volume": 0.5, "optimizer": "adam", "lr": 0.02, "move": 0.05, "filter_radius": 1.5,
+                  "method": "adjoint", "nx": 4, "ny": 2, "modes": 2, "t1": 0.05, "rtol": 1e-6, "atol": 1e-10,
+                  "beta": 0.0, "beta_max": 32.0, "beta_every": 20, "eta": 0.5, "case": "slider-crank"}
+        fj.save_checkpoint(directory / "checkpoint.npz", fj.Checkpoint(1, x, tuple(leaves), history, config))
+        return directory
+
+    def truncated_checkpoint(self, name: str) -> Path:
+        directory = self.checkpoint(name)
+        path = directory / "checkpoint.npz"
+        path.write_bytes(path.read_bytes()[:200])
+        return directory
+
+
+@contextlib.contextmanager
+def user_view():
+    """What a user sees: the calls run without the test suite's runtime type-checking hook (pytest's
+    `--jaxtyping-packages`), which would otherwise refuse e.g. `rtol=1` (an int for a `float`) before
+    the package's own check reads it."""
+    import jaxtyping
+
+    before = jaxtyping.config.jaxtyping_disable
+    jaxtyping.config.update("jaxtyping_disable", True)
+    try:
+        yield
+    finally:
+        jaxtyping.config.update("jaxtyping_disable", before)
+
+
+@dataclass(frozen=True)
+class Bad:
+    """One bad input through the API: `call(ctx)` must raise `error` with a message matching `match`."""
+
+    name: str
+    call: Callable[[Ctx], Any]
+    error: type | tuple
+    match: str
+    where: str
+
+
+@dataclass(frozen=True)
+class BadCli:
+    """One bad command line: `ffr-jax ARGV` (`{tmp}` is the scratch directory, `{setup}` the directory
+    that `setup(ctx)` returns) must exit with status 2 and one line `ffr-jax: error: ...` matching `match`."""
+
+    name: str
+    argv: str
+    match: str
+    where: str
+    setup: Callable[[Ctx], Path] | None = field(default=None)
+
+
+def with_design(ctx: Ctx, **entries):
+    x = ctx.x
+    for k, v in entries.items():
+        x = x.at[int(k[1:])].set(v)
+    return x
+
+
+V = ValueError
+DE = fj.DesignError
+SE = fj.SimulationError
+CE = fj.CheckpointError
+RTOL = r"rtol of .* must (be positive|lie in \[1e-14, 0.01\))"
+
+API = [
+    # --- silent wrong results before issue 17 ------------------------------------------------------
+    Bad("t1 = nan", lambda c: slider_crank(t1=NAN), V, r"slider_crank\(t1=...\) must be finite", "slider_crank()"),
+    Bad("t1 = inf", lambda c: slider_crank(t1=INF), V, r"t1=...\) must be finite", "slider_crank()"),
+    Bad("t1 = 0", lambda c: slider_crank(t1=0.0), V, r"t1=...\) must be positive", "slider_crank()"),
+    Bad("Problem t1 = nan", lambda c: fj.Problem(c.case.problem.scene, NAN, positions=np.zeros(3),
+                                                 objective=c.case.problem.objective), V, "t1 must be finite", "Problem()"),
+    Bad("objective rtol = 1", lambda c: fj.objective(c.case, c.x, rtol=1), V, RTOL, "objective() entry"),
+    Bad("objective rtol = -1", lambda c: fj.objective(c.case, c.x, rtol=-1), V, RTOL, "objective() entry"),
+    Bad("objective rtol = 0", lambda c: fj.objective(c.case, c.x, rtol=0.0), V, RTOL, "objective() entry"),
+    Bad("objective rtol = nan", lambda c: fj.objective(c.case, c.x, rtol=NAN), V, "rtol .* must be finite",
+        "objective() entry"),
+    Bad("objective atol = -1e-12", lambda c: fj.objective(c.case, c.x, atol=-1e-12), V, "atol .* must be positive",
+        "objective() entry"),
+    Bad("value_and_grad rtol = -1", lambda c: fj.value_and_grad(c.case, c.x, rtol=-1), V, RTOL,
+        "value_and_grad() entry"),
+    Bad("Backsolve(rtol=-1)", lambda c: fj.Backsolve(rtol=-1), V, RTOL, "Backsolve()"),
+    Bad("Backsolve(atol=-1)", lambda c: fj.Backsolve(atol=-1), V, "atol .* must be positive", "Backsolve()"),
+    Bad("Adjoint(rtol=0)", lambda c: fj.Adjoint(rtol=0.0), V, RTOL, "Adjoint()"),
+    Bad("Adjoint(atol=-1)", lambda c: fj.Adjoint(atol=-1.0), V, "atol .* must be positive", "Adjoint()"),
+    Bad("FiniteDifferences(step=0)", lambda c: fj.FiniteDifferences(step=0.0), V, r"step=...\) must be positive",
+        "FiniteDifferences()"),
+    Bad("FiniteDifferences(step=-1e-5)", lambda c: fj.FiniteDifferences(step=-1e-5), V, "must be positive",
+        "FiniteDifferences()"),
+    Bad("FiniteDifferences(step=nan)", lambda c: fj.FiniteDifferences(step=NAN), V, "must be finite",
+        "FiniteDifferences()"),
+    Bad("FiniteDifferences(step=0.6)", lambda c: c.fd(c.x, step=0.6), V, r"below \(1 - x_min\) / 2",
+        "value_and_grad() trace"),
+    Bad("FiniteDifferences(entries=(99,))", lambda c: c.fd(c.x, entries=(99,)), V, "holds index 99, but the design "
+        "has 4 variables", "value_and_grad() trace"),
+    Bad("FiniteDifferences(entries=(-1,))", lambda c: fj.FiniteDifferences(entries=(-1,)), V, "integer >= 0",
+        "FiniteDifferences()"),
+    Bad("FiniteDifferences(entries=())", lambda c: fj.FiniteDifferences(entries=()), V, "selects no design variable",
+        "FiniteDifferences()"),
+    Bad("FiniteDifferences(batch_size=0)", lambda c: fj.FiniteDifferences(batch_size=0), V,
+        r"batch_size=...\) must be an integer >= 1", "FiniteDifferences()"),
+    Bad("DensityFilter(radius=inf)", lambda c: fj.DensityFilter(c.case.design, INF), V, "finite non-negative",
+        "DensityFilter()"),
+    Bad("DensityFilter(radius=nan)", lambda c: fj.DensityFilter(c.case.design, NAN), V, "finite non-negative",
+        "DensityFilter()"),
+    Bad("DensityFilter(radius=-1)", lambda c: fj.DensityFilter(c.case.design, -1.0), V, "finite non-negative",
+        "DensityFilter()"),
+    Bad("SIMP(x_min=0)", lambda c: fj.SIMP(x_min=0.0), V, r"x_min=...\) must lie in \(0, 1\)", "SIMP()"),
+    Bad("SIMP(x_min=-0.1)", lambda c: fj.SIMP(x_min=-0.1), V, r"x_min=...\) must lie in \(0, 1\)", "SIMP()"),
+    Bad("SIMP(stiffness_penalty=-3)", lambda c: fj.SIMP(stiffness_penalty=-3.0), V, "stiffness_penalty=...\\) must "
+        "be positive", "SIMP()"),
+    Bad("SIMP(mass_penalty=-6)", lambda c: fj.SIMP(mass_penalty=-6.0), V, "mass_penalty", "SIMP()"),
+    Bad("SIMP(mass_factor=-1e5)", lambda c: fj.SIMP(mass_factor=-1e5), V, "mass_factor", "SIMP()"),
+    Bad("SIMP(x_switch=1.5)", lambda c: fj.SIMP(x_switch=1.5), V, r"x_switch=...\) must lie in \(0, 1\]", "SIMP()"),
+    Bad("SIMP(density=-8750)", lambda c: fj.SIMP(density=-8750.0), V, "density=...\\) must be positive", "SIMP()"),
+    Bad("SIMP(youngs_modulus=nan)", lambda c: fj.SIMP(youngs_modulus=NAN), V, "must be finite", "SIMP()"),
+    Bad("complex design", lambda c: fj.objective(c.case, c.x.astype(complex)), DE, "is complex", "design check"),
+    Bad("float32 design at x_min", lambda c: fj.objective(c.case, jnp.full(4, 0.01, jnp.float32)), DE,
+        "within float32 rounding of x_min", "design check"),
+    Bad("string design", lambda c: fj.objective(c.case, np.array(["a"] * 4)), DE, "real numbers", "design check"),
+    # --- right error, wrong message before issue 17 ------------------------------------------------
+    Bad("density 1.5 under jax.vmap", lambda c: jax.vmap(lambda x: fj.objective(c.case, x))(
+        jnp.stack([c.x, with_design(c, x3=1.5)])), DE, r"must lie in \[x_min, 1\]", "design check (vmap)"),
+    Bad("NaN density under jax.vmap", lambda c: jax.vmap(lambda x: fj.objective(c.case, x))(
+        jnp.stack([c.x, with_design(c, x3=NAN)])), DE, "contains NaN or inf", "design check (vmap)"),
+    Bad("inf density under jax.vmap", lambda c: jax.vmap(lambda x: fj.value_and_grad(c.case, x))(
+        jnp.stack([with_design(c, x0=INF), c.x])), DE, "contains NaN or inf", "design check (vmap)"),
+    Bad("density 1.5 under jax.jit + clean_errors", lambda c: fj.clean_errors(c.jitted)(with_design(c, x3=1.5)), DE,
+        r"^Design densities must lie in \[x_min, 1\]", "compiled check (user's jit)"),
+    Bad("NaN density under jax.jit + clean_errors", lambda c: fj.clean_errors(c.jitted)(with_design(c, x3=NAN)), DE,
+        "^Design vector contains NaN or inf", "compiled check (user's jit)"),
+    Bad("max_steps = 0", lambda c: fj.objective(c.case, c.x, max_steps=0), V, "max_steps .* integer >= 1",
+        "objective() entry"),
+    Bad("max_steps = -1", lambda c: fj.objective(c.case, c.x, max_steps=-1), V, "max_steps .* integer >= 1",
+        "objective() entry"),
+    Bad("max_steps = 10.5", lambda c: fj.objective(c.case, c.x, max_steps=10.5), V, "max_steps .* integer >= 1",
+        "objective() entry"),
+    Bad("Adjoint(max_steps=0)", lambda c: fj.Adjoint(max_steps=0), V, r"Adjoint\(max_steps=...\) must be an integer >= 1",
+        "Adjoint()"),
+    Bad("Direct(chunk=0)", lambda c: fj.Direct(chunk=0), V, r"Direct\(chunk=...\) must be an integer >= 1", "Direct()"),
+    Bad("Autodiff(checkpoints=2.5)", lambda c: fj.Autodiff(checkpoints=2.5), V, "checkpoints=...\\) must be an integer",
+        "Autodiff()"),
+    Bad("n_modes = 3.0", lambda c: slider_crank(n_modes=3.0), V, r"n_modes=...\) must be an integer", "slider_crank()"),
+    Bad("dead point, eccentricity 0.999 l", lambda c: fj.objective(variant(c.case, slider_crank(eccentricity=0.999)),
+                                                                   c.x), SE, "^Dead point", "compiled (Newton check)"),
+    Bad("dead point, eccentricity 0.99999 l", lambda c: fj.objective(
+        variant(c.case, slider_crank(eccentricity=0.99999)), c.x), SE, "^Dead point", "compiled (Newton check)"),
+    # Known weaker: in the batched solves of finite differences the first error raised can be Newton's
+    # (a lane's trial step beyond the dead point, where the linkage cannot assemble) rather than the
+    # dead-point check; still a SimulationError that names the geometry, never a number.
+    Bad("dead point, 0.99999 l, finite differences (batched)", lambda c: c.gradient(
+        variant(c.case, slider_crank(eccentricity=0.99999)), c.x), SE, "^Dead point|^Newton's method .* did not "
+        "converge", "compiled (Newton check, batched)"),
+    Bad("checkpoint with NaN design", lambda c: fj.load_checkpoint(c.checkpoint("nan_x", x=[0.5, NAN, 0.5, 0.5])
+                                                                   / "checkpoint.npz"),
+        CE, r"checkpoint.npz holds a design with NaN", "load_checkpoint()"),
+    Bad("checkpoint with density 1.5", lambda c: fj.load_checkpoint(c.checkpoint("big_x", x=[0.5, 1.5, 0.5, 0.5])
+                                                                    / "checkpoint.npz"),
+        CE, "holds a design with densities outside", "load_checkpoint()"),
+    Bad("checkpoint with NaN optimizer state", lambda c: fj.load_checkpoint(
+        c.checkpoint("nan_state", leaves=(np.array([0.0, NAN]),)) / "checkpoint.npz"),
+        CE, "NaN or inf in optimizer state", "load_checkpoint()"),
+    # --- handled before issue 17 (kept so that they stay handled) ----------------------------------
+    Bad("design of the wrong length", lambda c: fj.objective(c.case, c.x[:-1]), DE, r"has shape \(3,\), expected",
+        "design check"),
+    Bad("design density 0.005 < x_min", lambda c: fj.objective(c.case, with_design(c, x0=0.005)), DE,
+        r"must lie in \[x_min, 1\] = \[0.01, 1\]", "design check"),
+    Bad("design density inf", lambda c: fj.value_and_grad(c.case, with_design(c, x0=INF)), DE, "NaN or inf",
+        "design check"),
+    Bad("nx = 3", lambda c: slider_crank(nx=3), V, "nx", "slider_crank()"),
+    Bad("ny = 3 (odd)", lambda c: slider_crank(ny=3), V, "ny must be even", "slider_crank()"),
+    Bad("n_modes = 0", lambda c: slider_crank(n_modes=0), V, "n_modes", "slider_crank()"),
+    Bad("n_modes = 50 (too many)", lambda c: slider_crank(n_modes=50).frequencies(c.x), V, "n_modes=50",
+        "modal solver (trace)"),
+    Bad("eccentricity = l", lambda c: slider_crank(eccentricity=1.0), V, r"eccentricity must lie in \(0, l\)",
+        "slider_crank()"),
+    Bad("eccentricity = nan", lambda c: slider_crank(eccentricity=NAN), V, "eccentricity.* must be finite",
+        "slider_crank()"),
+    Bad("initial_design(1.5)", lambda c: c.case.initial_design(1.5), V, r"outside \[x_min, 1\]", "initial_design()"),
+    Bad("VolumeConstraint(1.5)", lambda c: fj.VolumeConstraint(1.5), V, "volume fraction must lie", "VolumeConstraint()"),
+    Bad("HeavisideProjection(eta=1)", lambda c: fj.HeavisideProjection(1.0), V, "eta must lie in", "HeavisideProjection()"),
+    Bad("unknown method", lambda c: fj.value_and_grad(c.case, c.x, "newton"), V, "newton", "value_and_grad() entry"),
+    Bad("truncated checkpoint", lambda c: fj.load_checkpoint(c.truncated_checkpoint("cut") / "checkpoint.npz"), CE,
+        "corrupt or incomplete", "load_checkpoint()"),
+    Bad("missing checkpoint", lambda c: fj.load_checkpoint(c.tmp / "none" / "checkpoint.npz"), CE, "checkpoint",
+        "load_checkpoint()"),
+]
+
+# Every command line has the small mesh; the bad option is what fails, before anything compiles.
+G = "gradient slider-crank --nx 4 --ny 2 --modes 2 --t1 0.05"
+O = "optimize slider-crank --nx 4 --ny 2 --modes 2 --t1 0.05 --iters 1"
+CLI = [
+    BadCli("--t1 nan", "gradient slider-crank --t1 nan", "--t1 must be finite", "CLI options"),
+    BadCli("--rtol -1", f"{G} --rtol -1", "rtol of the forward solve .* must be positive", "CLI options"),
+    BadCli("--rtol 1", f"{G} --rtol 1", r"must lie in \[1e-14, 0.01\)", "CLI options"),
+    BadCli("--atol -1", f"{G} --atol -1", "atol of the forward solve .* must be positive", "CLI options"),
+    BadCli("--backward-rtol nan", f"{G} --backward-rtol nan", "must be finite", "CLI options"),
+    BadCli("--fd-step 0", f"{G} --method fd --fd-step 0", r"--fd-step must lie in \(0, 0.495\)", "CLI options"),
+    BadCli("--fd-step with --method adjoint", f"{G} --fd-step 1e-5", "applies to --method fd", "CLI options"),
+    BadCli("--json to a missing directory", f"{G} --json {{tmp}}/missing/psi.json", "does not exist",
+           "CLI output paths"),
+    BadCli("--json to a directory", f"{G} --json {{tmp}}", "is a directory", "CLI output paths"),
+    BadCli("--plot to a missing directory", f"{G} --plot {{tmp}}/missing/g.png", "does not exist", "CLI output paths"),
+    BadCli("--plot to a directory", f"{G} --plot {{tmp}}", "is a directory", "CLI output paths"),
+    BadCli("--plot with an unknown format", f"{G} --plot {{tmp}}/g.xyz", "unknown image format", "CLI output paths"),
+    BadCli("--nx 3", "gradient slider-crank --nx 3", "nx", "slider_crank()"),
+    BadCli("--value 1.5", f"{G} --value 1.5", r"--value must lie in \[0.01, 1\]", "CLI options"),
+    BadCli("optimize --volume 2", f"{O} --volume 2 --out {{tmp}}/o1", r"--volume must lie in \(0.01, 1\]",
+           "CLI options"),
+    BadCli("optimize --lr -1", f"{O} --lr -1 --out {{tmp}}/o2", "--lr must be positive", "CLI options"),
+    BadCli("optimize --filter-radius inf", f"{O} --filter-radius inf --out {{tmp}}/o3", "--filter-radius must be finite",
+           "CLI options"),
+    BadCli("optimize --projection-beta -1", f"{O} --projection-beta -1 --out {{tmp}}/o4", "--projection-beta must be",
+           "CLI options"),
+    BadCli("optimize --iters -1", f"{O.replace('--iters 1', '--iters -1')} --out {{tmp}}/o5", "--iters must be",
+           "CLI options"),
+    BadCli("optimize --checkpoint-every 0", f"{O} --checkpoint-every 0 --out {{tmp}}/o6", "--checkpoint-every must be",
+           "CLI options"),
+    BadCli("optimize --out a file", f"{O} --out {{setup}}", "is a file, not a directory", "CLI output paths",
+           lambda c: _file(c.tmp / "a_file")),
+    BadCli("--resume a checkpoint with NaN design", f"{O} --resume {{setup}}", "checkpoint.npz holds a design with NaN",
+           "load_checkpoint() (CLI)", lambda c: c.checkpoint("cli_nan", x=[0.5, NAN, 0.5, 0.5])),
+    BadCli("--resume a checkpoint with density 0.005", f"{O} --resume {{setup}}",
+           r"holds a design with densities outside \[0.01, 1", "load_checkpoint() (CLI)",
+           lambda c: c.checkpoint("cli_low", x=[0.5, 0.005, 0.5, 0.5])),
+    BadCli("--resume a checkpoint with inf optimizer state", f"{O} --resume {{setup}}", "NaN or inf in optimizer state",
+           "load_checkpoint() (CLI)", lambda c: c.checkpoint("cli_state", leaves=(np.array([INF]),))),
+    BadCli("--resume a truncated checkpoint", f"{O} --resume {{setup}}", "corrupt or incomplete",
+           "load_checkpoint() (CLI)", lambda c: c.truncated_checkpoint("cli_cut")),
+    BadCli("--resume with another --volume", "optimize slider-crank --volume 0.3 --resume {setup}",
+           "the run was made with --volume 0.5", "CLI options", lambda c: c.checkpoint("cli_conflict")),
+]
+
+
+def _file(path: Path) -> Path:
+    path.write_text("not a directory")
+    return path
+
+
+def run_cli(ctx: Ctx, bad: BadCli) -> tuple[int, str, str]:
+    """`ffr-jax ARGV` in this process: `(exit status, stdout, stderr)` (argparse's own errors included)."""
+    from ffr_jax._cli import main
+
+    setup = bad.setup(ctx) if bad.setup is not None else None
+    argv = bad.argv.format(tmp=ctx.tmp, setup=setup).split()
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            status = main(argv)
+        except SystemExit as exit_:
+            status = exit_.code
+    return status, out.getvalue(), err.getvalue()
+
+
+def strict_json_of(record) -> str:
+    """What the CLI writes: strict JSON (no bare NaN), or a clear `ValueError`."""
+    from ffr_jax._cli_checks import finite_record
+
+    return json.dumps(finite_record(record, "--json out.json"), allow_nan=False)
+
+
+def timed(fn) -> tuple[float, BaseException | None, Any]:
+    start = time.perf_counter()
+    try:
+        result = fn()
+        return time.perf_counter() - start, None, result
+    except BaseException as err:  # noqa: BLE001 - the point is to record whatever is raised
+        return time.perf_counter() - start, err, None
+
+
+def finite(tree) -> bool:
+    return all(np.all(np.isfinite(np.asarray(leaf))) for leaf in jax.tree_util.tree_leaves(tree))
