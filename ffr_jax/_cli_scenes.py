@@ -6,10 +6,12 @@ SCENES = {
 }
 # Options of each scene and their defaults.
 # `atol`: the absolute tolerance of the solves, below the elastic coordinates (about 1e-5 for the
-# slider-crank rod, 1e-7 for the link, whose interface modes are stiffer).
+# slider-crank rod, 1e-7 for the link, whose interface modes are stiffer). `optimizer` (ffr-jax
+# optimize): Adam for the rod; optimality criteria for the link, which is scale-free, while Adam's
+# eps 1e-8 dominates its step at the link's gradients (~1e-10; benchmarks/RESULTS.md).
 SCENE_DEFAULTS = {
-    "slider-crank": {"nx": 100, "ny": 6, "modes": 6, "t1": 3.0, "atol": 1e-12},
-    "link-four-bar": {"mesh_size": 0.004, "modes": 4, "t1": 0.3, "atol": 1e-15},
+    "slider-crank": {"nx": 100, "ny": 6, "modes": 6, "t1": 3.0, "atol": 1e-12, "optimizer": "adam"},
+    "link-four-bar": {"mesh_size": 0.004, "modes": 4, "t1": 0.3, "atol": 1e-15, "optimizer": "oc"},
 }
 
 

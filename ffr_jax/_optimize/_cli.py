@@ -14,7 +14,7 @@ from ._driver import CHECKPOINT, optimize
 # Settings that define a run: stored in its checkpoints, taken from there on --resume.
 _DEFAULTS = {
     "volume": 0.5,
-    "optimizer": "adam",
+    "optimizer": None,  # the scene's default (ffr_jax._cli_scenes): adam for the rod, oc for the link
     "lr": 0.02,
     "move": 0.05,
     "filter_radius": 1.5,
@@ -49,7 +49,8 @@ def add_optimize_parser(sub) -> None:
     p.add_argument("case", choices=list(SCENES), help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items()))
     p.add_argument("--volume", type=float, help="volume fraction V in (x_min, 1] (default 0.5)")
     p.add_argument("--iters", type=int, default=50, help="total number of steps (default 50)")
-    p.add_argument("--optimizer", choices=["adam", "oc"], help="optax.adam or optimality criteria (default adam)")
+    p.add_argument("--optimizer", choices=["adam", "oc"], help="optax.adam or optimality criteria (default: adam for slider-crank; oc for "
+                        "link-four-bar, whose psi ~ 1e-8 and |grad| ~ 1e-10 leave Adam's steps to its eps)")
     p.add_argument("--lr", type=float, help="Adam learning rate (default 0.02)")
     p.add_argument("--move", type=float, help="OC move limit (default 0.05)")
     p.add_argument("--filter-radius", type=float,
