@@ -8,23 +8,25 @@ import numpy as np
 
 from .._api import METHODS
 from .._cli_checks import optimize_options
+from .._cli_scenes import SCENES, describe, make_case, scene_settings
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
 
 # Settings that define a run: stored in its checkpoints, taken from there on --resume.
 _DEFAULTS = {
     "volume": 0.5,
-    "optimizer": "adam",
+    "optimizer": None,  # the scene's default (ffr_jax._cli_scenes): adam for the rod, oc for the link
     "lr": 0.02,
     "move": 0.05,
     "filter_radius": 1.5,
     "method": "adjoint",
-    "nx": 100,
-    "ny": 6,
-    "modes": 6,
-    "t1": 3.0,
+    "nx": None,  # the scene's settings: None takes the scene's default (ffr_jax._cli_scenes)
+    "ny": None,
+    "mesh_size": None,
+    "modes": None,
+    "t1": None,
     "rtol": 1e-8,
-    "atol": 1e-12,
+    "atol": None,
     "beta": 0.0,
     "beta_max": 32.0,
     "beta_every": 20,
@@ -45,10 +47,11 @@ def add_optimize_parser(sub) -> None:
             "--resume DIR takes them from there (options given again must agree)."
         ),
     )
-    p.add_argument("case", choices=["slider-crank"], help="the scene (the paper's reference case)")
+    p.add_argument("case", choices=list(SCENES), help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items()))
     p.add_argument("--volume", type=float, help="volume fraction V in (x_min, 1] (default 0.5)")
     p.add_argument("--iters", type=int, default=50, help="total number of steps (default 50)")
-    p.add_argument("--optimizer", choices=["adam", "oc"], help="optax.adam or optimality criteria (default adam)")
+    p.add_argument("--optimizer", choices=["adam", "oc"], help="optax.adam or optimality criteria (default: adam for slider-crank; oc for "
+                        "link-four-bar, whose psi ~ 1e-8 and |grad| ~ 1e-10 leave Adam's steps to its eps)")
     p.add_argument("--lr", type=float, help="Adam learning rate (default 0.02)")
     p.add_argument("--move", type=float, help="OC move limit (default 0.05)")
     p.add_argument("--filter-radius", type=float,
@@ -65,13 +68,16 @@ def add_optimize_parser(sub) -> None:
     p.add_argument("--resume", metavar="DIR", help="continue the run stored in DIR")
     p.add_argument("--checkpoint-every", type=int, default=10, metavar="K",
                    help="steps between checkpoints (default 10)")
-    p.add_argument("--nx", type=int, help="elements along the rod (default 100)")
-    p.add_argument("--ny", type=int, help="elements across the rod, even (default 6)")
-    p.add_argument("--modes", type=int, help="retained modes (default 6)")
-    p.add_argument("--t1", type=float, help="end time in s (default 3)")
+    p.add_argument("--nx", type=int, help="slider-crank: elements along the rod (default 100)")
+    p.add_argument("--ny", type=int, help="slider-crank: elements across the rod, even (default 6)")
+    p.add_argument("--mesh-size", type=float, help="link-four-bar: target element size of the gmsh mesh in m "
+                                                    "(default 0.004)")
+    p.add_argument("--modes", type=int, help="retained eigenmodes (default 6; link-four-bar 4)")
+    p.add_argument("--t1", type=float, help="end time in s (default 3; link-four-bar 0.3)")
     p.add_argument("--rtol", type=float, help="relative tolerance of the solves (default 1e-8)")
     p.add_argument("--atol", type=float,
-                   help="absolute tolerance of the solves (default 1e-12; short runs have tiny elastic coordinates)")
+                   help="absolute tolerance of the solves (default 1e-12; link-four-bar 1e-15; short runs have tiny "
+                        "elastic coordinates)")
     p.add_argument("--no-progress", action="store_true", help="no progress line")
     p.set_defaults(func=_run)
 
@@ -104,8 +110,9 @@ def _run(args: argparse.Namespace) -> int:
     import ffr_jax as fj
 
     directory, s = _settings(args)
+    s.update(scene_settings(s["case"], s))
     optimize_options(s, args, directory, resume=args.resume is not None)
-    case = fj.cases.slider_crank(nx=s["nx"], ny=s["ny"], n_modes=s["modes"], t1=s["t1"])
+    case = make_case(s["case"], s)
     filt = fj.DensityFilter(case.design, s["filter_radius"])
     projection, beta = None, None
     if s["beta"] > 0.0:
@@ -118,7 +125,7 @@ def _run(args: argparse.Namespace) -> int:
         optimizer = fj.optimality_criteria(constraint, move=s["move"])
     fun = fj.make_objective(case, s["method"], filter=filt, projection=projection, rtol=s["rtol"], atol=s["atol"])
     projected = "" if beta is None else f", Heaviside projection beta {s['beta']} -> {s['beta_max']} (x2 every {s['beta_every']})"
-    print(f"optimize {s['case']}: {case.mesh.nx} x {case.mesh.ny} elements, {case.n_design} densities, "
+    print(f"optimize {describe(s['case'], case)}, "
           f"V = {s['volume']}, {s['optimizer']}, filter radius {s['filter_radius']}{projected}, {args.iters} steps "
           f"-> {directory}")
     result = optimize(
@@ -133,7 +140,7 @@ def _run(args: argparse.Namespace) -> int:
     np.savez(directory / "design.npz", x=np.asarray(result.x), x_phys=x_phys, psi=h.value, volume=h.volume,
              max_change=h.change, beta=np.array(np.nan if beta_last is None else beta_last),
              config=np.array(json.dumps(s, sort_keys=True)))
-    ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, V = {s['volume']}, {h.steps} steps")
+    ax = fj.plot_design(case, x_phys, title=f"{s['case']}, V = {s['volume']}, {h.steps} steps")
     ax.figure.savefig(directory / "design.png", dpi=150)
     ax = fj.plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)
