@@ -69,6 +69,12 @@ def spread_entries(case, count):
     return sorted({(k % ny) * n + int(c) for k, c in enumerate(columns)})
 
 
+def _modal_solver(case):
+    """The modal solver the case's rod takes (AutoModes resolved)."""
+    solver = case.design.reduction.solver
+    return solver.choose(case.design.model) if isinstance(solver, fj.AutoModes) else solver
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--nx", type=int, default=REFERENCE["nx"])
@@ -195,7 +201,7 @@ def main(argv=None):
     device = jax.devices()[0]
     header = [
         f"Case: slider-crank {args.nx} x {args.ny}, {args.modes} modes, t1 = {args.t1} s, x = {args.value} "
-        f"({case.n_design} design variables, {flat.size} scene parameters, {'sparse' if case.sparse_fe else 'dense'} FE path); "
+        f"({case.n_design} design variables, {flat.size} scene parameters, {type(_modal_solver(case)).__name__}); "
         f"forward Dopri8 (the default solver) rtol {args.rtol:g} / "
         f"atol {args.atol:g} ({steps} steps); adjoint and backsolve backward rtol {args.backward_rtol:g} / "
         f"atol {args.backward_atol:g}.",

@@ -124,6 +124,12 @@ def design_array(x, of_body: str = "") -> jnp.ndarray:
     return jnp.asarray(x, dtype=jnp.float64)
 
 
+# Round-off slack at the design bounds: filtered densities are convex combinations whose weights sum to
+# 1 up to n eps (n ~ 10^2 neighbours: ~1e-14), so a design at its bound x_min or 1 filters to a few eps
+# outside it; 1e-12 admits that and nothing a user would mean (float32 rounding of 0.01 is 2e-10).
+DESIGN_SLACK = 1e-12
+
+
 def design_values(x, x_min: float, of_body: str = "") -> None:
     """Concrete design values: finite and inside `[x_min, 1]`, or a [`DesignError`][] naming the entries."""
     values = np.asarray(x)
@@ -131,7 +137,7 @@ def design_values(x, x_min: float, of_body: str = "") -> None:
     if bad.size:
         raise DesignError(f"Design vector contains NaN or inf{of_body} at {_entries(bad, values)}; every density must be "
                           f"a finite number in [x_min, 1] = [{x_min}, 1].")
-    bad = np.flatnonzero((values < x_min) | (values > 1.0))
+    bad = np.flatnonzero((values < x_min - DESIGN_SLACK) | (values > 1.0 + DESIGN_SLACK))
     if bad.size:
         raise DesignError(f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; {_entries(bad, values)} "
                           f"{'is' if bad.size == 1 else 'are'} outside. Clip or project the design first "

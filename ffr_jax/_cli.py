@@ -10,23 +10,26 @@ from pathlib import Path
 import numpy as np
 
 from . import _cli_checks
+from ._cli_scenes import SCENE_DEFAULTS, SCENES, describe, make_case, scene_settings
 from ._io._cli import add_io_parsers
 from ._optimize._cli import add_optimize_parser
 
 
 def _add_case_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("case", choices=["slider-crank"], help="the scene (the paper's reference case)")
-    p.add_argument("--nx", type=int, default=100, help="elements along the rod (default 100)")
-    p.add_argument("--ny", type=int, default=6, help="elements across the rod, even (default 6)")
-    p.add_argument("--modes", type=int, default=6, help="retained modes (default 6)")
-    p.add_argument("--t1", type=float, default=3.0, help="end time in s (default 3)")
+    p.add_argument("case", choices=list(SCENES), help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items()))
+    p.add_argument("--nx", type=int, default=None, help="slider-crank: elements along the rod (default 100)")
+    p.add_argument("--ny", type=int, default=None, help="slider-crank: elements across the rod, even (default 6)")
+    p.add_argument("--mesh-size", type=float, default=None,
+                   help="link-four-bar: target element size of the gmsh mesh in m (default 0.004)")
+    p.add_argument("--modes", type=int, default=None, help="retained eigenmodes (default 6; link-four-bar 4)")
+    p.add_argument("--t1", type=float, default=None, help="end time in s (default 3; link-four-bar 0.3)")
     p.add_argument("--value", type=float, default=0.5, help="uniform design density (default 0.5)")
 
 
 def _make_case(args):
-    import ffr_jax as fj
-
-    return fj.cases.slider_crank(nx=args.nx, ny=args.ny, n_modes=args.modes, t1=args.t1)
+    settings = scene_settings(args.case, {"nx": args.nx, "ny": args.ny, "mesh_size": args.mesh_size,
+                                          "modes": args.modes, "t1": args.t1})
+    return make_case(args.case, settings)
 
 
 def _info(args) -> int:
@@ -39,11 +42,10 @@ def _info(args) -> int:
     data = jax.block_until_ready(case.body_data(x))
     freq = np.asarray(case.frequencies(x))
     elapsed = time.perf_counter() - t
-    print(f"slider-crank rod: {case.mesh.nx} x {case.mesh.ny} Q4 elements, {case.n_design} design variables, "
-          f"x = {args.value}")
+    print(f"{describe(args.case, case)}, x = {args.value}")
     print("natural frequencies [Hz]: " + ", ".join(f"{f:.4g}" for f in freq))
     print(f"mass {float(data.mass):.6g} kg, centre of mass x {float(data.first_moment[0] / data.mass):.6g} m, "
-          f"inertia about A {float(data.inertia):.6g} kg m^2")
+          f"inertia about the frame origin {float(data.inertia):.6g} kg m^2")
     print(f"modal mass diag {np.round(np.diag(np.asarray(data.modal_mass)), 12)}")
     print(f"(FE + modes + body data, compile included: {elapsed:.2f} s)")
     return 0
@@ -56,6 +58,8 @@ def _gradient(args) -> int:
     from ffr_jax._api import sensitivity_method
     from ffr_jax._cacheable import cache_events, compile_value_and_grad
 
+    if args.atol is None:
+        args.atol = SCENE_DEFAULTS[args.case]["atol"]
     _cli_checks.gradient_options(args)
     case = _make_case(args)
     x = case.initial_design(args.value)
@@ -67,9 +71,8 @@ def _gradient(args) -> int:
         rtol = defaults.rtol if args.backward_rtol is None else args.backward_rtol
         atol = defaults.atol if args.backward_atol is None else args.backward_atol
         method = fj.Adjoint(rtol=rtol, atol=atol) if args.method == "adjoint" else fj.Backsolve(rtol=rtol, atol=atol)
-    print(f"slider-crank rod: {case.mesh.nx} x {case.mesh.ny} Q4 elements, {case.n_design} design variables, "
-          f"x = {args.value}, {case.n_modes} modes, t1 = {case.t1} s; method {args.method}, "
-          f"rtol {args.rtol:g}, atol {args.atol:g}")
+    print(f"{describe(args.case, case)}, x = {args.value}, {case.n_modes} modes, t1 = {case.t1} s; "
+          f"method {args.method}, rtol {args.rtol:g}, atol {args.atol:g}")
     # Compiled as programs the persistent cache can keep (a second run loads them instead of compiling).
     events = cache_events()
     directory = None if args.no_cache else cache_directory()
@@ -92,14 +95,22 @@ def _gradient(args) -> int:
                "traced_program_loaded": info["exported_loaded"]}
 
     print(f"psi = {psi:.10e}")
-    row, col = np.unravel_index(np.argmax(np.abs(case.design_grid(grad))), (case.mesh.ny, case.mesh.nx - 2))
+    rod = args.case == "slider-crank"
+    largest = int(np.argmax(np.abs(grad)))
+    if rod:
+        row, col = np.unravel_index(largest, (case.mesh.ny, case.mesh.nx - 2))
+        where = f"element row {row}, column {col + 1}"
+    else:
+        element = int(case.design.domain.design_elements[largest])
+        where = f"element {element} at {np.round(case.mesh.element_centroids()[element], 4).tolist()} m"
     print(f"gradient: min {grad.min():.4e}, max {grad.max():.4e}, max |g| {np.abs(grad).max():.4e} "
-          f"(element row {row}, column {col + 1}), 2-norm {np.linalg.norm(grad):.4e}")
-    print("sign pattern by element row (bottom to top):")
-    for row in fj.row_signs(case, grad):
-        print(f"  row {row['row']}  y in [{row['y_min']:+.4f}, {row['y_max']:+.4f}] m: "
-              f"{row['n_negative']:4d} negative, {row['n_positive']:4d} positive, mean {row['mean']:+.3e}  "
-              f"[{row['sign']}]")
+          f"({where}), 2-norm {np.linalg.norm(grad):.4e}")
+    if rod:
+        print("sign pattern by element row (bottom to top):")
+        for row in fj.row_signs(case, grad):
+            print(f"  row {row['row']}  y in [{row['y_min']:+.4f}, {row['y_max']:+.4f}] m: "
+                  f"{row['n_negative']:4d} negative, {row['n_positive']:4d} positive, mean {row['mean']:+.3e}  "
+                  f"[{row['sign']}]")
     print(f"timings: compile {compile_s:.2f} s, compile + first call {timings['compile_and_first_call_s']:.2f} s, "
           f"second call {runs[1]:.3f} s")
     print(f"compilation cache: scene-gradient program {'loaded' if info['exported_loaded'] else 'traced'}; "
@@ -110,19 +121,29 @@ def _gradient(args) -> int:
             "psi": psi,
             "grad": grad.tolist(),
             "timings": timings,
-            "case": {"name": args.case, "nx": case.mesh.nx, "ny": case.mesh.ny, "modes": case.n_modes,
-                     "t1": case.t1, "value": args.value},
+            "case": {"name": args.case, "n_elements": case.mesh.n_elements, "modes": case.n_modes, "t1": case.t1,
+                     "value": args.value},
             "method": args.method,
             "rtol": args.rtol,
             "atol": args.atol,
-            "grid_shape": [case.mesh.ny, case.mesh.nx - 2],
         }
+        if rod:
+            record["case"].update(nx=case.mesh.nx, ny=case.mesh.ny)
+            record["grid_shape"] = [case.mesh.ny, case.mesh.nx - 2]
+        else:
+            record["case"]["mesh_size"] = args.mesh_size if args.mesh_size is not None else \
+                SCENE_DEFAULTS[args.case]["mesh_size"]
+            record["design_elements"] = np.asarray(case.design.domain.design_elements).tolist()
         text = json.dumps(_cli_checks.finite_record(record, f"--json {args.json}"), indent=1, allow_nan=False)
         Path(args.json).write_text(text)
         print(f"wrote {args.json}")
     if args.plot is not None:
-        figure = fj.plot_gradient(case, grad, title=f"dpsi/dx ({args.method}), {case.mesh.nx} x {case.mesh.ny} rod, "
-                                                    f"x = {args.value}, psi = {psi:.6e}")
+        if rod:
+            figure = fj.plot_gradient(case, grad, title=f"dpsi/dx ({args.method}), {case.mesh.nx} x {case.mesh.ny} "
+                                                        f"rod, x = {args.value}, psi = {psi:.6e}")
+        else:
+            figure = fj.plot_field(case, grad, signed=True, title=f"dpsi/dx ({args.method}), link coupler, "
+                                                                  f"x = {args.value}, psi = {psi:.6e}").figure
         figure.savefig(args.plot, dpi=150)
         print(f"wrote {args.plot}")
     return 0
@@ -136,12 +157,13 @@ def _add_gradient_parser(sub) -> None:
         help="objective psi and its gradient with respect to all densities",
         description="psi of the case at a uniform design and its design gradient by one sensitivity method: "
                     "a summary with the sign pattern by element row, and compile and run times. "
-                    "--json writes {psi, grad (design order), timings, ...}; --plot draws the field over the rod.",
+                    "--json writes {psi, grad (design order), timings, ...}; --plot draws the field over the designed body.",
     )
     _add_case_arguments(p)
     p.add_argument("--method", choices=sorted(METHODS), default="adjoint", help="sensitivity method (default adjoint)")
     p.add_argument("--rtol", type=float, default=1e-10, help="forward relative tolerance (default 1e-10)")
-    p.add_argument("--atol", type=float, default=1e-12, help="forward absolute tolerance (default 1e-12)")
+    p.add_argument("--atol", type=float, default=None,
+                   help="forward absolute tolerance (default 1e-12; link-four-bar 1e-15)")
     p.add_argument("--backward-rtol", type=float, default=None,
                    help="relative tolerance of the backward solve of adjoint / backsolve (default 1e-8)")
     p.add_argument("--backward-atol", type=float, default=None,
@@ -149,7 +171,7 @@ def _add_gradient_parser(sub) -> None:
     p.add_argument("--fd-step", type=float, default=None,
                    help="finite-difference step for --method fd (default: ffr_jax.FiniteDifferences's)")
     p.add_argument("--json", metavar="PATH", help="write psi, grad and timings as JSON")
-    p.add_argument("--plot", metavar="PATH", help="draw the gradient field over the rod (PNG, PDF, ...)")
+    p.add_argument("--plot", metavar="PATH", help="draw the gradient field over the designed body (PNG, PDF, ...)")
     p.set_defaults(func=_gradient)
 
 
@@ -194,7 +216,7 @@ def main(argv=None) -> int:
                         help=f"do not use the persistent compilation cache (also {NO_CACHE_ENV}=1; its directory: "
                              f"${CACHE_ENV} or ~/.cache/ffr_jax/xla)")
     sub = parser.add_subparsers(dest="command", required=True)
-    p_info = sub.add_parser("info", help="frequencies, mass and body data of a case's rod")
+    p_info = sub.add_parser("info", help="frequencies, mass and body data of a case's designed body")
     _add_case_arguments(p_info)
     p_info.set_defaults(func=_info)
     _add_gradient_parser(sub)

@@ -60,7 +60,7 @@ def _plot_format(path) -> None:
 
 def optimize_options(settings: dict, args, directory: Path, resume: bool) -> None:
     """The settings of `ffr-jax optimize` (defaults, a resumed checkpoint's, the options) and its directory."""
-    case_options(SimpleNamespace(**{k: settings[k] for k in ("nx", "ny", "modes", "t1")}))
+    case_options(SimpleNamespace(**{k: settings.get(k) for k in ("nx", "ny", "modes", "t1")}))
     _checks.tolerances(settings["rtol"], settings["atol"], "the solves (--rtol, --atol)")
     _checks.in_interval(settings["volume"], "--volume", X_MIN, 1.0, low_open=True,
                         advice="It is the volume fraction V of the design.")

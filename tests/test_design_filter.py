@@ -55,3 +55,19 @@ def test_filter_on_an_unstructured_mesh_with_passive_elements():
     np.testing.assert_allclose(fd.DensityFilter(domain, 0.12 / h_unit).matrix(), h, rtol=0, atol=ROUNDOFF)
     with pytest.raises(ValueError, match="non-negative"):
         fd.DensityFilter(domain, -1.0)
+
+
+def test_a_design_at_its_bounds_filters_to_a_valid_design():
+    """A design at x_min (or 1) everywhere filters to x_min (or 1) up to round-off (the rows of H sum
+    to 1 within n eps): the design check admits that round-off (1e-12) and still refuses a density a
+    hair further out (1e-9), found when the OC optimiser drove the link's elements to x_min."""
+    plate = fd.plate_with_hole(1.0, 0.2, 6, grading=1.5)
+    domain = fd.DesignDomain(plate.mesh)
+    filt = fd.DensityFilter(domain, radius=0.12, scale=(1.0, 1.0))
+    x_min = 0.01
+    for bound in (x_min, 1.0):
+        x_phys = filt(jnp.full(domain.n_design, bound))
+        assert float(jnp.max(jnp.abs(x_phys - bound))) < 1e-13, "H x stays at the bound up to round-off"
+        domain.check(x_phys - 1e-14 * (1 if bound == x_min else -1), x_min).block_until_ready()
+    with pytest.raises(Exception, match=r"must lie in \[x_min, 1\]"):
+        domain.check(jnp.full(domain.n_design, x_min - 1e-9), x_min).block_until_ready()

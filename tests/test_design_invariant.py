@@ -7,9 +7,10 @@
    the same K, M, frequencies, span projector of the modes, body data and gradient of a
    span-invariant body-data scalar to 1e-10 (relative to each quantity's size).
 3. Through the full case: a small slider–crank whose rod is the unstructured mesh gives the psi and
-   the adjoint gradient of the structured one to 1e-10 (the reference case:
-   benchmarks/RESULTS.md, "Rod cases before and after the design map", which also compares the
-   numbers with those of the FE modules the design map replaced).
+   the adjoint gradient of the structured one to 1e-10 (the reference case itself:
+   `benchmarks/bench_design_map.py --compare benchmarks/results/design_map_before.json --unstructured`,
+   which also compares the numbers with those of the FE modules the design map replaced; its
+   RESULTS.md section "Rod cases before and after the design map" is written by `--write`).
 
 Tolerance of 2: the two meshes give the same matrices up to the summation order (1e-15 relative)
 and ARPACK starts from different vectors. Eigenvalues move by `phi^T dK phi / phi^T M phi`,

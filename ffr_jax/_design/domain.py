@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .._checks import design_array, design_values, is_traced
+from .._checks import DESIGN_SLACK, design_array, design_values, is_traced
 from .._errors import DesignError, error_if
 from .mesh import QuadMesh, StructuredGrid, _format_ids
 
@@ -125,7 +125,7 @@ class DesignDomain(eqx.Module):
         x = error_if(x, ~jnp.all(jnp.isfinite(x)), f"Design vector contains NaN or inf{of_body}; every density must "
                      f"be a finite number in [x_min, 1] = [{x_min}, 1].", DesignError)
         return error_if(
-            x, jnp.any((x < x_min) | (x > 1.0)),
+            x, jnp.any((x < x_min - DESIGN_SLACK) | (x > 1.0 + DESIGN_SLACK)),
             f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; clip or project the design first.",
             DesignError,
         )

@@ -9,13 +9,14 @@ import numpy as np
 
 from .._api import METHODS
 from .._cli_checks import optimize_options
+from .._cli_scenes import SCENES, describe, make_case, scene_settings
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
 
 # Settings that define a run: stored in its checkpoints, taken from there on --resume.
 _DEFAULTS = {
     "volume": 0.5,
-    "optimizer": "adam",
+    "optimizer": None,  # the scene's default (ffr_jax._cli_scenes): adam for the rod, oc for the link
     "lr": 0.02,
     "move": 0.05,
     "mma_move": 0.2,
@@ -24,12 +25,13 @@ _DEFAULTS = {
     "stop_change": 0.0,
     "filter_radius": 1.5,
     "method": "adjoint",
-    "nx": 100,
-    "ny": 6,
-    "modes": 6,
-    "t1": 3.0,
+    "nx": None,  # the scene's settings: None takes the scene's default (ffr_jax._cli_scenes)
+    "ny": None,
+    "mesh_size": None,
+    "modes": None,
+    "t1": None,
     "rtol": 1e-8,
-    "atol": 1e-12,
+    "atol": None,
     "beta": 0.0,
     "beta_max": 32.0,
     "beta_every": 20,
@@ -52,13 +54,15 @@ def add_optimize_parser(sub) -> None:
             "must agree)."
         ),
     )
-    p.add_argument("case", choices=["slider-crank"], help="the scene (the paper's reference case)")
+    p.add_argument("case", choices=list(SCENES), help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items()))
     p.add_argument("--volume", type=float,
                    help="volume fraction V in (x_min, 1] (default 0.5): held exactly by adam and oc, "
                         "an upper bound for mma")
     p.add_argument("--iters", type=int, default=50, help="total number of steps (default 50)")
     p.add_argument("--optimizer", choices=["adam", "oc", "mma"],
-                   help="optax.adam, optimality criteria, or the method of moving asymptotes (default adam)")
+                   help="optax.adam, optimality criteria, or the method of moving asymptotes with constraints "
+                        "(default: adam for slider-crank; oc for link-four-bar, whose psi ~ 1e-8 and |grad| ~ 1e-10 "
+                        "leave Adam's steps to its eps)")
     p.add_argument("--lr", type=float, help="Adam learning rate (default 0.02)")
     p.add_argument("--move", type=float, help="OC move limit (default 0.05)")
     p.add_argument("--mma-move", type=float, help="MMA move limit per step (default 0.2)")
@@ -82,13 +86,16 @@ def add_optimize_parser(sub) -> None:
     p.add_argument("--resume", metavar="DIR", help="continue the run stored in DIR")
     p.add_argument("--checkpoint-every", type=int, default=10, metavar="K",
                    help="steps between checkpoints (default 10)")
-    p.add_argument("--nx", type=int, help="elements along the rod (default 100)")
-    p.add_argument("--ny", type=int, help="elements across the rod, even (default 6)")
-    p.add_argument("--modes", type=int, help="retained modes (default 6)")
-    p.add_argument("--t1", type=float, help="end time in s (default 3)")
+    p.add_argument("--nx", type=int, help="slider-crank: elements along the rod (default 100)")
+    p.add_argument("--ny", type=int, help="slider-crank: elements across the rod, even (default 6)")
+    p.add_argument("--mesh-size", type=float, help="link-four-bar: target element size of the gmsh mesh in m "
+                                                    "(default 0.004)")
+    p.add_argument("--modes", type=int, help="retained eigenmodes (default 6; link-four-bar 4)")
+    p.add_argument("--t1", type=float, help="end time in s (default 3; link-four-bar 0.3)")
     p.add_argument("--rtol", type=float, help="relative tolerance of the solves (default 1e-8)")
     p.add_argument("--atol", type=float,
-                   help="absolute tolerance of the solves (default 1e-12; short runs have tiny elastic coordinates)")
+                   help="absolute tolerance of the solves (default 1e-12; link-four-bar 1e-15; short runs have tiny "
+                        "elastic coordinates)")
     p.add_argument("--no-progress", action="store_true",
                    help="no progress report (a tqdm bar on a terminal, a line per tenth of the run otherwise)")
     p.set_defaults(func=_run)
@@ -121,7 +128,7 @@ def _settings(args: argparse.Namespace) -> tuple[Path, dict, set]:
 
 
 @functools.cache
-def _problem(nx: int, ny: int, modes: int, t1: float, filter_radius: float, eta: float | None, method: str,
+def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | None, method: str,
              rtol: float, atol: float):
     """`(case, filter, projection, objective)` of a setting, built once per process.
 
@@ -132,7 +139,12 @@ def _problem(nx: int, ny: int, modes: int, t1: float, filter_radius: float, eta:
     import ffr_jax as fj
     from .._io._cli import slider_crank_case
 
-    case = slider_crank_case(nx, ny, modes, t1)
+    settings = dict(geometry)
+    if scene == "slider-crank":  # the case object of the other commands (animate, export): shared programs
+        case = slider_crank_case(int(settings["nx"]), int(settings["ny"]), int(settings["modes"]),
+                                 float(settings["t1"]))
+    else:
+        case = make_case(scene, settings)
     filt = fj.DensityFilter(case.design, filter_radius)
     projection = None if eta is None else fj.HeavisideProjection(eta, x_min=case.material.x_min)
     fun = fj.make_objective(case, method, filter=filt, projection=projection, rtol=rtol, atol=atol)
@@ -145,14 +157,16 @@ def _run(args: argparse.Namespace) -> int:
     import ffr_jax as fj
 
     directory, s, stored = _settings(args)
+    s.update(scene_settings(s["case"], s))
     optimize_options(s, args, directory, resume=args.resume is not None)
     # Runs stored before a setting existed resume with its default (and keep their stored config).
     config = {key: value for key, value in s.items() if key in stored or value != _DEFAULTS.get(key)}
-    if s["beta"] < 0.0:
-        raise ValueError(f"--projection-beta must be >= 0 (0 = no projection), got {s['beta']}.")
-    case, filt, projection, fun = _problem(int(s["nx"]), int(s["ny"]), int(s["modes"]), float(s["t1"]),
-                                           float(s["filter_radius"]), float(s["eta"]) if s["beta"] > 0.0 else None,
-                                           s["method"], float(s["rtol"]), float(s["atol"]))
+    # The case's own settings (mesh, modes, t1) key the shared objective; the optimizer and tolerances do not.
+    geometry = tuple(sorted((k, v) for k, v in scene_settings(s["case"], s).items()
+                            if k not in ("optimizer", "atol")))
+    case, filt, projection, fun = _problem(s["case"], geometry, float(s["filter_radius"]),
+                                           float(s["eta"]) if s["beta"] > 0.0 else None, s["method"],
+                                           float(s["rtol"]), float(s["atol"]))
     beta = None
     if s["beta"] > 0.0:
         beta = fj.beta_continuation(s["beta"], max(s["beta_max"], s["beta"]), every=s["beta_every"])
@@ -174,7 +188,7 @@ def _run(args: argparse.Namespace) -> int:
     projected = "" if beta is None else f", Heaviside projection beta {s['beta']} -> {s['beta_max']} (x2 every {s['beta_every']})"
     bounds = "".join(f", {c.name} {'>=' if isinstance(c, fj.FrequencyConstraint) else '<='} "
                      f"{c.minimum if isinstance(c, fj.FrequencyConstraint) else c.bound:g}" for c in constraints[1:])
-    print(f"optimize {s['case']}: {case.mesh.nx} x {case.mesh.ny} elements, {case.n_design} densities, "
+    print(f"optimize {describe(s['case'], case)}, "
           f"V = {s['volume']}{bounds}, {s['optimizer']}, filter radius {s['filter_radius']}{projected}, "
           f"{args.iters} steps -> {directory}")
     result = optimize(
@@ -192,7 +206,7 @@ def _run(args: argparse.Namespace) -> int:
              config=np.array(json.dumps(s, sort_keys=True)), constraint_names=np.array(json.dumps(list(h.names))),
              constraint_history=h.constraint_values, constraints=np.asarray(result.constraints))
     bound = f"V = {s['volume']}" if s["optimizer"] != "mma" else f"V = {x_phys.mean():.3f} (<= {s['volume']})"
-    ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, {s['optimizer']}, {bound}, {h.steps} steps")
+    ax = fj.plot_design(case, x_phys, title=f"{s['case']}, {s['optimizer']}, {bound}, {h.steps} steps")
     ax.figure.savefig(directory / "design.png", dpi=150)
     ax = fj.plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)

@@ -3,11 +3,14 @@
 import numpy as np
 
 from .._case import Case
+from .._design.mesh import StructuredGrid
+from .._gradient_plot import plot_field
 from ._history import History
 
 
 def plot_design(case: Case, x_phys, ax=None, *, title: str | None = None):
-    """Draw the physical densities over the whole rod (interface columns solid), as in the paper.
+    """Draw the physical densities over the whole rod (interface columns solid), as in the paper
+    (over the elements of any other mesh with `ffr_jax.plot_field`).
 
     **Arguments:**
     - `case`: the case whose rod the design shapes; `x_phys`: `(n_design,)` physical densities.
@@ -17,9 +20,11 @@ def plot_design(case: Case, x_phys, ax=None, *, title: str | None = None):
     """
     from matplotlib.figure import Figure
 
+    mesh = case.mesh
+    if not isinstance(mesh, StructuredGrid):  # any other mesh: the elements drawn one by one
+        return plot_field(case, x_phys, ax, title=title)
     if ax is None:
         ax = Figure(figsize=(10, 2.2), layout="constrained").subplots()
-    mesh = case.mesh
     field = np.asarray(case.design.element_densities(np.asarray(x_phys))).reshape(mesh.ny, mesh.nx)
     image = ax.imshow(
         field, origin="lower", cmap="gray_r", vmin=0.0, vmax=1.0, interpolation="nearest", aspect="auto",

@@ -5,4 +5,5 @@ from ._flexible_pendulum import flexible_pendulum as flexible_pendulum
 from ._four_bar import four_bar as four_bar
 from ._rigid_slider_crank import rigid_slider_crank as rigid_slider_crank
 from ._spinning_beam import spinning_beam as spinning_beam
+from ._link_four_bar import link_body as link_body, link_four_bar as link_four_bar
 from ._rod import rod_body as rod_body
