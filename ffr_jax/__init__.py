@@ -16,7 +16,7 @@ from ._design import (
     ElementOperator as ElementOperator, FEModel as FEModel, FixedDofs as FixedDofs, HingedHinged as HingedHinged,
     Interface as Interface, LanczosModes as LanczosModes, LinkMesh as LinkMesh, ModalBasis as ModalBasis,
     ModalReduction as ModalReduction, PlateWithHole as PlateWithHole, Q4 as Q4, QM6 as QM6, QuadMesh as QuadMesh,
-    SIMP as SIMP, StructuredGrid as StructuredGrid, from_meshio as from_meshio, link_with_holes as link_with_holes,
+    SIMP as SIMP, StackedDesigns as StackedDesigns, StackedFilter as StackedFilter, StructuredGrid as StructuredGrid, from_meshio as from_meshio, link_with_holes as link_with_holes,
     plate_with_hole as plate_with_hole, quad_cell_data as quad_cell_data, read_mesh as read_mesh,
     retained_eigenpairs as retained_eigenpairs, rod_domain as rod_domain, rod_joint_nodes as rod_joint_nodes,
     structured_grid as structured_grid, write_mesh as write_mesh,
