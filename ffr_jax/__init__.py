@@ -22,6 +22,9 @@ from ._design import (
     structured_grid as structured_grid, write_mesh as write_mesh,
 )
 from ._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient, row_signs as row_signs
+from ._io._animation import Animation as Animation, animate as animate, body_motion as body_motion
+from ._io._outline import density_outline as density_outline, write_dxf as write_dxf, write_svg as write_svg
+from ._io._vtu import write_vtu as write_vtu
 from ._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
 from ._objective._base import AbstractIntegrand as AbstractIntegrand
 from ._objective._combine import Scaled as Scaled, Sum as Sum
@@ -55,11 +58,19 @@ from ._sensitivity._finite_differences import FiniteDifferences as FiniteDiffere
 from ._sharding import sharded_map as sharded_map
 from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state
 from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
-from ._optimize._driver import OptimizeResult as OptimizeResult, optimize as optimize
+from ._optimize._conditions import OperatingConditions as OperatingConditions
+from ._optimize._constraint import AbstractDesignConstraint as AbstractDesignConstraint
+from ._optimize._driver import ConstraintViolationWarning as ConstraintViolationWarning, OptimizeResult as OptimizeResult, optimize as optimize
+from ._optimize._frequency import FrequencyConstraint as FrequencyConstraint
+from ._optimize._function_constraint import FunctionConstraint as FunctionConstraint
 from ._optimize._history import History as History
+from ._optimize._mass import MassConstraint as MassConstraint
+from ._optimize._mma import MMA as MMA, MMAState as MMAState
 from ._optimize._oc import optimality_criteria as optimality_criteria
+from ._optimize._optimizer import AbstractOptimizer as AbstractOptimizer, ProjectedOptax as ProjectedOptax
 from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective, physical_densities as physical_densities
+from ._optimize._pytree import OnBody as OnBody
 from ._optimize._projection import HeavisideProjection as HeavisideProjection, beta_continuation as beta_continuation
-from ._optimize._plot import plot_design as plot_design, plot_history as plot_history
+from ._optimize._plot import plot_constraints as plot_constraints, plot_design as plot_design, plot_history as plot_history
 from ._optimize._step import StepInfo as StepInfo, make_step as make_step
 from ._optimize._volume import VolumeConstraint as VolumeConstraint

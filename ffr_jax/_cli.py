@@ -1,4 +1,4 @@
-"""The `ffr-jax` command line: `info`, `gradient`, `optimize`, `benchmark`."""
+"""The `ffr-jax` command line: `info`, `gradient`, `optimize`, `animate`, `export`."""
 
 import argparse
 import json
@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._io._cli import add_io_parsers
 from ._optimize._cli import add_optimize_parser
 
 
@@ -182,6 +183,7 @@ def main(argv=None) -> int:
     p_info.set_defaults(func=_info)
     _add_gradient_parser(sub)
     add_optimize_parser(sub)
+    add_io_parsers(sub)
     args = parser.parse_args(argv)
     _use_cache(not args.no_cache)
     try:

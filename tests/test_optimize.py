@@ -5,8 +5,13 @@ Most tests run on a cheap convex surrogate `psi(x) = sum(w / x) + sum(m x^2)` wh
 both signs (like the inertia-affected compliance); one runs a few steps of the real tiny case.
 """
 
+import functools
 import json
 import os
+import pathlib
+import signal
+import subprocess
+import sys
 import zipfile
 
 import jax
@@ -19,6 +24,8 @@ import scipy.optimize
 import ffr_jax as fj
 from ffr_jax._cli import main
 
+from helpers import small_case
+
 VOLUME = 0.4
 VOLUME_TOL = 1e-10  # the projection meets V to round-off; the issue asks for 1e-6
 ROUND_OFF = 1e-12
@@ -26,7 +33,8 @@ FD_REL_TOL = 1e-7
 
 
 def small_design(nx=12, ny=4):
-    return fj.rod_domain(nx, ny)
+    """The rod as a designed body (the filter needs its domain, the mass bound its material and element sizes)."""
+    return fj.cases.rod_body(nx, ny, 2)
 
 
 def surrogate(n, seed=0):
@@ -42,13 +50,14 @@ def surrogate(n, seed=0):
 
 
 def optimizers(constraint):
-    return {"adam": optax.adam(0.05), "oc": fj.optimality_criteria(constraint, move=0.1)}
+    return {"adam": optax.adam(0.05), "oc": fj.optimality_criteria(constraint, move=0.1),
+            "mma": fj.MMA(constraint.x_min, move=0.2)}
 
 
 # --- density filter ----------------------------------------------------------------------------
 @pytest.mark.parametrize("radius", [0.0, 1.0, 1.5, 2.5])
 def test_filter_rows_sum_to_one_and_reach_radius(radius):
-    design = small_design()
+    design = small_design().domain
     h = np.asarray(fj.DensityFilter(design, radius).matrix())
     np.testing.assert_allclose(h.sum(axis=1), 1.0, atol=ROUND_OFF, err_msg="rows of H")
     assert np.all(h >= 0.0), "filter weights must be non-negative"
@@ -300,7 +309,13 @@ def test_step_compiles_once(name):
     for _ in range(6):
         x, state, _ = step(x, state)
     assert len(traces) == 1, f"the step was traced {len(traces)} times"
-    assert step._cache_size() == 1
+    compiled = step.advance.func._cache_size()
+    again = fj.make_step(fun, optimizer, constraint)  # another step from the same objects
+    again(x, state)
+    assert len(traces) == 1, "the objective is compiled once per fun, not once per step"
+    assert step.advance.func._cache_size() == compiled, "the update is compiled once per optimizer and constraints"
+    fj.make_step(fun, optimizers(constraint)[name], constraint)(x, state)
+    assert step.advance.func._cache_size() == compiled + 1, "another optimizer object gets its own program"
 
 
 @pytest.mark.parametrize("name", ["adam", "oc"])
@@ -334,17 +349,31 @@ def test_projected_volume_holds_after_every_update_through_a_continuation(name):
 
 
 # --- driver, log and checkpoints ----------------------------------------------------------------
-def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLUME, every=4, projected=False):
-    filt = fj.DensityFilter(small_design(), 1.5)
+@functools.cache
+def problem(name, volume, projected, extra):
+    """The surrogate run's objects, built once: runs that share them share their compiled programs."""
+    design = small_design()
+    filt = fj.DensityFilter(design, 1.5)
     _, value_and_grad = surrogate(filt.weights.shape[0])
     projection = fj.HeavisideProjection(x_min=X_MIN) if projected else None
-    beta = fj.beta_continuation(1.0, 8.0, every=3) if projected else None
     constraint = fj.VolumeConstraint(volume, filter=filt, projection=projection)
+    constraints = constraint
+    if extra:
+        spread = fj.FunctionConstraint(lambda x, *beta: (jnp.sum((x - 0.5) ** 2), 2 * (x - 0.5)), 2.0, name="spread")
+        constraints = (constraint, fj.MassConstraint(design, 2.5, filter=filt, projection=projection), spread)
+    fun = fj.filtered_objective(value_and_grad, filt, projection)
+    return fun, jnp.full(filt.weights.shape[0], volume), optimizers(constraint)[name], constraints
+
+
+def run(directory, name, iterations, *, resume=False, callback=None, volume=VOLUME, every=4, projected=False,
+        extra=False, progress=False, **kwargs):
+    """A run on the surrogate; `extra`: MMA with a mass bound and a function constraint beside the volume."""
+    fun, x0, optimizer, constraints = problem(name, volume, projected, extra)
+    beta = fj.beta_continuation(1.0, 8.0, every=3) if projected else None
     return fj.optimize(
-        fj.filtered_objective(value_and_grad, filt, projection), jnp.full(filt.weights.shape[0], volume),
-        optimizers(constraint)[name], constraint, iterations=iterations, directory=directory, resume=resume,
-        checkpoint_every=every, config={"optimizer": name, "volume": volume}, progress=False, callback=callback,
-        beta=beta,
+        fun, x0, optimizer, constraints, iterations=iterations, directory=directory, resume=resume,
+        checkpoint_every=every, config={"optimizer": name, "volume": volume}, progress=progress, callback=callback,
+        beta=beta, **kwargs,
     )
 
 
@@ -360,16 +389,24 @@ def interrupt_at(k):
     return callback
 
 
-@pytest.mark.parametrize("name,projected", [("adam", False), ("oc", False), ("adam", True)])
-def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name, projected):
-    # Projected: beta doubles every 3 steps, so the resumed part (steps 4-11) crosses raises.
-    whole = run(tmp_path / "whole", name, 12, projected=projected)
+@pytest.mark.filterwarnings("ignore::ffr_jax.ConstraintViolationWarning")  # 12 steps do not settle the bounds
+@pytest.mark.parametrize("name,projected,extra", [("adam", False, False), ("oc", False, False), ("adam", True, False),
+                                                  ("mma", True, True)])
+def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name, projected, extra):
+    # Projected: beta doubles every 3 steps, so the resumed part (steps 4-11) crosses raises. MMA keeps
+    # x_{k-1}, x_{k-2} and the asymptotes in its state: the resumed updates must use the stored ones.
+    whole = run(tmp_path / "whole", name, 12, projected=projected, extra=extra)
     with pytest.raises(Interrupt):  # after 6 steps; the last checkpoint holds 4
-        run(tmp_path / "cut", name, 12, callback=interrupt_at(5), projected=projected)
+        run(tmp_path / "cut", name, 12, callback=interrupt_at(5), projected=projected, extra=extra)
     assert fj.load_checkpoint(tmp_path / "cut" / "checkpoint.npz").iteration == 4
-    resumed = run(tmp_path / "cut", name, 12, resume=True, projected=projected)
+    resumed = run(tmp_path / "cut", name, 12, resume=True, projected=projected, extra=extra)
+    if name == "mma":
+        assert resumed.history.names == ("volume", "mass", "spread")
+        assert resumed.history.constraint_values.shape == (12, 3)
+        np.testing.assert_array_equal(resumed.constraints, whole.constraints, err_msg="constraints at the end")
     np.testing.assert_array_equal(resumed.x, whole.x, err_msg="final design")
-    for got, expected, quantity in zip(resumed.history, whole.history, ("psi", "volume", "max change"), strict=True):
+    for got, expected, quantity in zip(resumed.history, whole.history,
+                                       ("psi", "volume", "max change", "constraints", "names"), strict=True):
         np.testing.assert_array_equal(got, expected, err_msg=f"history of {quantity}")
     for got, expected in zip(jax.tree.leaves(resumed.opt_state), jax.tree.leaves(whole.opt_state), strict=True):
         np.testing.assert_array_equal(got, expected, err_msg="optimizer state")
@@ -458,6 +495,207 @@ def test_crash_while_writing_keeps_the_previous_checkpoint(tmp_path, monkeypatch
     assert kept.iteration == 3, "the previous checkpoint must survive a failed write"
     np.testing.assert_array_equal(kept.x, old.x)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.npz"], "no temporary file left behind"
+
+
+@pytest.mark.filterwarnings("ignore::ffr_jax.ConstraintViolationWarning")  # 12 steps do not settle the bounds
+def test_a_killed_run_resumes_with_every_constraint_history(tmp_path):
+    # A real SIGKILL (no exception handler, no `finally`) in another process after step 5: the
+    # checkpoint of step 6 and the flushed log rows survive, and the resumed run repeats the
+    # uninterrupted one bit for bit, with the history of all three constraints.
+    script = tmp_path / "killed_run.py"
+    script.write_text(
+        "import sys, time\n"
+        "import jax\n"
+        "jax.config.update('jax_enable_x64', True)\n"
+        "jax.config.update('jax_numpy_dtype_promotion', 'strict')\n"
+        f"sys.path.insert(0, {str(pathlib.Path(__file__).parent)!r})\n"
+        "from test_optimize import run\n"
+        "def wait_for_the_kill(k, x, info):\n"
+        "    if k == 5:\n"
+        "        print('step 5 done', flush=True)\n"
+        "        time.sleep(300)\n"
+        "run(sys.argv[1], 'mma', 12, extra=True, every=2, callback=wait_for_the_kill)\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(pathlib.Path(__file__).parent.parent))
+    process = subprocess.Popen([sys.executable, str(script), str(tmp_path / "cut")], stdout=subprocess.PIPE, env=env,
+                               text=True)
+    try:
+        assert process.stdout.readline().strip() == "step 5 done", "the run did not reach step 5"
+    finally:
+        process.kill()
+        process.wait(timeout=60)
+    assert process.returncode == -signal.SIGKILL
+    assert fj.load_checkpoint(tmp_path / "cut" / "checkpoint.npz").iteration == 6
+    resumed = run(tmp_path / "cut", "mma", 12, resume=True, extra=True, every=2)
+    whole = run(tmp_path / "whole", "mma", 12, extra=True, every=2)
+    np.testing.assert_array_equal(resumed.x, whole.x, err_msg="final design")
+    for got, expected, quantity in zip(resumed.history, whole.history,
+                                       ("psi", "volume", "max change", "constraints", "names"), strict=True):
+        np.testing.assert_array_equal(got, expected, err_msg=f"history of {quantity}")
+    assert resumed.history.names == ("volume", "mass", "spread")
+    assert (tmp_path / "cut" / "log.csv").read_text() == (tmp_path / "whole" / "log.csv").read_text()
+
+
+def test_log_and_checkpoint_keep_every_constraint(tmp_path):
+    result = run(tmp_path, "mma", 6, extra=True, every=2)
+    rows = (tmp_path / "log.csv").read_text().splitlines()
+    assert rows[0] == "iteration,psi,volume,max_change,g_volume,g_mass,g_spread" and len(rows) == 7
+    log = np.loadtxt(tmp_path / "log.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(log[:, 4:], result.history.constraint_values, err_msg="constraint columns")
+    checkpoint = fj.load_checkpoint(tmp_path / "checkpoint.npz")
+    assert checkpoint.history.names == ("volume", "mass", "spread")
+    np.testing.assert_array_equal(checkpoint.history.constraint_values, result.history.constraint_values)
+    with pytest.raises(fj.CheckpointError, match="constraints"):  # a resume with other constraints
+        run(tmp_path, "mma", 8, resume=True)
+    ax = fj.plot_history(result.history)
+    assert len(ax.figure.axes) == 3, "psi, max change, and the constraint panel"
+    assert [line.get_label() for line in ax.figure.axes[1].get_lines()][:3] == ["g_volume", "g_mass", "g_spread"]
+
+
+def test_mma_meets_several_constraints_and_lowers_psi():
+    result = run(None, "mma", 60, extra=True)
+    assert result.feasible, result.descriptions
+    g = result.constraints
+    assert np.all(g <= 1e-6), f"every constraint holds at the end: {result.descriptions}"
+    assert result.history.value[-1] < result.history.value[0]
+    assert all("holds" in line for line in result.descriptions)
+
+
+def test_contradicting_constraints_end_reported_infeasible():
+    # volume <= 0.3 and mass >= the mass of the uniform 0.6 design: the mass law is linear above
+    # x = 0.1, so the mass needs a volume fraction near 0.6 (up to the interface columns). Each bound
+    # alone can be met (neither is refused at construction); together they cannot.
+    design = small_design()
+    n = design.n_design
+    _, value_and_grad = surrogate(n)
+    mass_06 = float(fj.MassConstraint(design, 1.0).mass(design.initial_design(0.6)))
+    constraints = (fj.VolumeConstraint(0.3), fj.MassConstraint(design, mass_06, lower=True))
+    with pytest.warns(fj.ConstraintViolationWarning, match=r"mass: mass .* VIOLATED") as record:
+        result = fj.optimize(value_and_grad, jnp.full(n, 0.5), fj.MMA(X_MIN, move=0.2), constraints,
+                             iterations=30, progress=False)
+    assert "admit no design together" in str(record[0].message)
+    assert not result.feasible
+    assert np.all(np.isfinite(result.history.value)) and np.all(np.isfinite(result.history.constraint_values))
+    assert np.all(np.isfinite(result.x))
+    # MMA's artificial variables y_i absorb what cannot be met (penalty c y + d y^2 / 2): here the
+    # volume is held and the mass bound left 37 % short.
+    assert result.constraints.max() > 0.05
+
+
+def test_frequency_bound_out_of_reach_ends_reported_infeasible():
+    case = small_case()
+    with pytest.warns(UserWarning, match="above f_1"):
+        frequency = fj.FrequencyConstraint(case, 3.0 * fj.FrequencyConstraint(case, 1.0).solid)
+    mass = fj.MassConstraint(case.design, 10.0)
+    with pytest.warns(fj.ConstraintViolationWarning, match="frequency: f_1 .* VIOLATED"):
+        result = fj.optimize(lambda x: mass.value_and_grad(x), case.initial_design(0.5), fj.MMA(case.material.x_min),
+                             (fj.VolumeConstraint(0.5), frequency), iterations=15, progress=False)
+    assert not result.feasible and result.constraints[1] > 0.3
+    assert np.all(np.isfinite(result.history.constraint_values))
+
+
+def test_a_nan_stops_the_run_with_the_step(tmp_path):
+    n = small_design().n_design
+    _, value_and_grad = surrogate(n)
+
+    def fun(x):  # NaN once the design has moved away from the start (from step 2 on)
+        value, grad = value_and_grad(x)
+        return jnp.where(jnp.max(jnp.abs(x - 0.4)) > 0.15, jnp.nan, value), grad
+
+    with pytest.raises(FloatingPointError, match=r"Step \d+ of the optimisation produced psi = nan"):
+        fj.optimize(fun, jnp.full(n, 0.4), fj.MMA(X_MIN, move=0.1), fj.VolumeConstraint(VOLUME), iterations=20,
+                    directory=tmp_path, checkpoint_every=1, progress=False)
+    saved = fj.load_checkpoint(tmp_path / "checkpoint.npz")
+    assert saved.iteration >= 1 and np.all(np.isfinite(saved.history.value)), "the checkpoint holds the good steps"
+
+
+def test_stop_change_ends_early_and_a_resume_stops_there_too(tmp_path):
+    whole = run(tmp_path / "whole", "mma", 200, stop_change=0.02)
+    steps = whole.history.steps
+    assert steps < 200 and whole.history.change[-1] <= 0.02 and np.all(whole.history.change[:-1] > 0.02)
+    assert fj.load_checkpoint(tmp_path / "whole" / "checkpoint.npz").iteration == steps
+    again = run(tmp_path / "whole", "mma", 200, resume=True, stop_change=0.02)
+    assert again.history.steps == steps, "a resumed run that already met the rule makes no step"
+
+
+# --- designs of several bodies (a dict by body name) -----------------------------------------------
+@functools.cache
+def two_bodies():
+    """Two rods of other element sizes (a: 12 x 4 over 1 m, b: 8 x 2 over 0.5 m), a filter each, and a
+    surrogate objective of the dict design."""
+    filters = {"a": fj.DensityFilter(fj.cases.rod_body(12, 4, 2), 1.5),
+               "b": fj.DensityFilter(fj.cases.rod_body(8, 2, 2, length=0.5), 1.5)}
+    n = {k: f.areas.shape[0] for k, f in filters.items()}
+    psi_a, _ = surrogate(n["a"], 0)
+    psi_b, _ = surrogate(n["b"], 1)
+    fun = fj.filtered_objective(jax.value_and_grad(lambda x: psi_a(x["a"]) + psi_b(x["b"])), filters)
+    return filters, fun, {k: jnp.full(n[k], 0.5) for k in n}
+
+
+def area_fraction(filters, x, bodies):
+    """sum_b a_b . (H_b x_b) / sum_b sum(a_b) in NumPy, with H_b as a dense matrix."""
+    used = sum(np.asarray(filters[b].areas) @ (np.asarray(filters[b].matrix()) @ np.asarray(x[b])) for b in bodies)
+    return used / sum(float(np.sum(filters[b].areas)) for b in bodies)
+
+
+def test_mma_takes_a_design_of_two_bodies_with_a_volume_each(tmp_path):
+    filters, fun, x0 = two_bodies()
+    volumes = (fj.OnBody(fj.VolumeConstraint(0.4, filter=filters["a"]), "a"),
+               fj.OnBody(fj.VolumeConstraint(0.6, filter=filters["b"]), "b"))
+    seen = []
+    result = fj.optimize(fun, x0, fj.MMA(X_MIN, move=0.2), volumes, iterations=30, directory=tmp_path,
+                         progress=False, callback=lambda k, x, info: seen.append(type(x)))
+    assert isinstance(result.x, dict) and set(result.x) == {"a", "b"} and seen == [dict] * 30
+    assert result.history.names == ("volume_a", "volume_b") and result.feasible, result.descriptions
+    for k, (body, bound) in enumerate([("a", 0.4), ("b", 0.6)]):
+        fraction = area_fraction(filters, result.x, [body])
+        # The reported g against the fraction from the dense filter matrix: both sum the same 40 or 12
+        # products, so they agree to round-off (1e-12 leaves a factor 100).
+        np.testing.assert_allclose(result.constraints[k], fraction / bound - 1.0, atol=1e-12)
+        assert fraction <= bound * (1 + 1e-3), (body, fraction)
+    # Better than the uniform design at the two bounds (feasible: H 1 = 1).
+    uniform = {"a": jnp.full(x0["a"].shape, 0.4), "b": jnp.full(x0["b"].shape, 0.6)}
+    assert result.history.value[-1] < float(fun(uniform)[0])
+    assert result.descriptions[0].startswith("a: volume fraction")
+    stored = fj.load_checkpoint(tmp_path / "checkpoint.npz")
+    np.testing.assert_array_equal(stored.x, np.concatenate([result.x["a"], result.x["b"]]),
+                                  err_msg="the checkpoint holds the flat design, bodies in sorted name order")
+
+
+def test_a_volume_shared_by_two_bodies_is_their_area_fraction():
+    filters, fun, x0 = two_bodies()
+    shared = fj.VolumeConstraint(0.45, filter=filters)
+    rng = np.random.default_rng(7)
+    x = {k: jnp.asarray(rng.uniform(0.05, 1.0, v.shape)) for k, v in x0.items()}
+    # The elements of b are half as long as a's, so an unweighted mean would differ by percents.
+    np.testing.assert_allclose(shared.fraction(x), area_fraction(filters, x, ["a", "b"]), rtol=1e-13)
+    result = fj.optimize(fun, x0, fj.MMA(X_MIN, move=0.2), shared, iterations=30, progress=False)
+    assert result.feasible, result.descriptions
+    assert area_fraction(filters, result.x, ["a", "b"]) <= 0.45 * (1 + 1e-3)
+    with pytest.raises(ValueError, match="dict"):
+        shared.fraction(x["a"])
+    with pytest.raises(ValueError, match="MMA"):
+        fj.optimize(fun, x0, optax.adam(0.05), fj.VolumeConstraint(0.45, filter=filters), iterations=1, progress=False)
+
+
+def test_optax_optimizers_refuse_other_constraints():
+    design = small_design()
+    _, value_and_grad = surrogate(design.n_design)
+    volume = fj.VolumeConstraint(VOLUME)
+    with pytest.raises(ValueError, match="use fj.MMA"):
+        fj.make_step(value_and_grad, optax.adam(0.1), (volume, fj.MassConstraint(design, 1.0)))
+    with pytest.raises(ValueError, match="Unknown optimizer"):
+        fj.make_step(value_and_grad, "adam", volume)
+
+
+def test_progress_is_plain_lines_when_not_a_terminal(capsys):
+    # Under pytest standard error is not a terminal: no tqdm bar with carriage returns, a line per
+    # tenth of the run with the last step's numbers.
+    run(None, "mma", 20, extra=True, progress=True)
+    err = capsys.readouterr().err
+    lines = err.splitlines()
+    assert "\r" not in err and len(lines) == 10, err
+    assert lines[-1].startswith("100%") and "20/20" in lines[-1] and "psi" in lines[-1] and "max g" in lines[-1]
 
 
 # --- command line -------------------------------------------------------------------------------

@@ -1,2 +1,4 @@
 """Topology optimisation: the design gradient as an optax-ready objective, a density filter, the
-volume constraint, the optimality-criteria update, checkpoints and the `optimize` driver."""
+Heaviside projection, design constraints (volume, mass, first natural frequency, any function of the
+design), the optimality-criteria update, the method of moving asymptotes, checkpoints and the
+`optimize` driver."""

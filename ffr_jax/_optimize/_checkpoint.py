@@ -13,7 +13,8 @@ import numpy as np
 
 from ._history import History
 
-_FORMAT = "ffr_jax.optimize.checkpoint/1"
+_FORMAT = "ffr_jax.optimize.checkpoint/2"
+_READABLE = ("ffr_jax.optimize.checkpoint/1", _FORMAT)  # /1 had no constraint history
 
 
 class CheckpointError(ValueError):
@@ -25,7 +26,8 @@ class Checkpoint(NamedTuple):
 
     - `iteration`: number of completed steps; `x`: the design after them, `(n_design,)`.
     - `opt_state_leaves`: the leaves of the optimizer state (see [`restore_opt_state`][]).
-    - `history`: the [`History`][] of those steps; `config`: the settings of the run (JSON data).
+    - `history`: the [`History`][] of those steps, with every constraint's values and names;
+      `config`: the settings of the run (JSON data).
 
     The runs are deterministic (no random numbers), so there is no RNG state to keep.
     """
@@ -58,6 +60,8 @@ def save_checkpoint(path, checkpoint: Checkpoint) -> None:
         "history_value": np.asarray(checkpoint.history.value),
         "history_volume": np.asarray(checkpoint.history.volume),
         "history_change": np.asarray(checkpoint.history.change),
+        "history_constraints": np.asarray(checkpoint.history.constraint_values),
+        "constraint_names": np.array(json.dumps(list(checkpoint.history.names))),
         "config": np.array(json.dumps(checkpoint.config, sort_keys=True)),
     }
     for i, leaf in enumerate(checkpoint.opt_state_leaves):
@@ -106,12 +110,17 @@ def load_checkpoint(path) -> Checkpoint:
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}  # reading checks every CRC
-        if str(arrays["format"]) != _FORMAT:
+        if str(arrays["format"]) not in _READABLE:
             raise ValueError(f"unknown format {str(arrays['format'])!r}, expected {_FORMAT!r}")
         iteration = int(arrays["iteration"])
-        history = History(arrays["history_value"], arrays["history_volume"], arrays["history_change"])
-        if not all(len(h) == iteration for h in history):
-            raise ValueError(f"the history has {[len(h) for h in history]} entries for {iteration} iterations")
+        names = tuple(json.loads(str(arrays["constraint_names"]))) if "constraint_names" in arrays else ()
+        constraints = arrays.get("history_constraints", np.zeros((iteration, 0)))
+        history = History(arrays["history_value"], arrays["history_volume"], arrays["history_change"],
+                          constraints, names)
+        lengths = [len(h) for h in history[:4]]
+        if not all(n == iteration for n in lengths) or constraints.shape != (iteration, len(names)):
+            raise ValueError(f"the history has {lengths} entries ({constraints.shape} constraint values for "
+                             f"{len(names)} constraints) for {iteration} iterations")
         leaves = tuple(arrays[f"opt_state_{i}"] for i in range(int(arrays["n_opt_state"])))
         config = json.loads(str(arrays["config"]))
         x = arrays["x"]

@@ -1,6 +1,7 @@
 """The `ffr-jax optimize` subcommand: volume-constrained minimisation of a case's objective."""
 
 import argparse
+import functools
 import json
 from pathlib import Path
 
@@ -16,6 +17,10 @@ _DEFAULTS = {
     "optimizer": "adam",
     "lr": 0.02,
     "move": 0.05,
+    "mma_move": 0.2,
+    "frequency_min": 0.0,
+    "mass_max": 0.0,
+    "stop_change": 0.0,
     "filter_radius": 1.5,
     "method": "adjoint",
     "nx": 100,
@@ -35,21 +40,33 @@ def add_optimize_parser(sub) -> None:
     """Add the `optimize` subcommand to the `ffr-jax` subparsers `sub`."""
     p = sub.add_parser(
         "optimize",
-        help="minimise the case's objective over the densities at a fixed volume fraction",
+        help="minimise the case's objective over the densities under volume (and other) constraints",
         description=(
-            "Volume-constrained topology optimisation of the rod: a density filter, the exact design "
-            "gradient, Adam or optimality criteria, the projection onto the volume after every step. "
-            "Writes DIR/log.csv, DIR/checkpoint.npz (every k steps), and at the end DIR/design.npz, "
-            "DIR/design.png and DIR/convergence.png. A run's settings are stored in its checkpoint: "
-            "--resume DIR takes them from there (options given again must agree)."
+            "Topology optimisation of the rod: a density filter, the exact design gradient, and either Adam "
+            "or optimality criteria with the projection onto the volume after every step, or MMA with the "
+            "volume, a first-frequency bound and a mass bound as inequality constraints. "
+            "Writes DIR/log.csv (one column per constraint), DIR/checkpoint.npz (every k steps), and at the end "
+            "DIR/design.npz, DIR/design.png and DIR/convergence.png (objective and every constraint). A run's "
+            "settings are stored in its checkpoint: --resume DIR takes them from there (options given again "
+            "must agree)."
         ),
     )
     p.add_argument("case", choices=["slider-crank"], help="the scene (the paper's reference case)")
-    p.add_argument("--volume", type=float, help="volume fraction V in (x_min, 1] (default 0.5)")
+    p.add_argument("--volume", type=float,
+                   help="volume fraction V in (x_min, 1] (default 0.5): held exactly by adam and oc, "
+                        "an upper bound for mma")
     p.add_argument("--iters", type=int, default=50, help="total number of steps (default 50)")
-    p.add_argument("--optimizer", choices=["adam", "oc"], help="optax.adam or optimality criteria (default adam)")
+    p.add_argument("--optimizer", choices=["adam", "oc", "mma"],
+                   help="optax.adam, optimality criteria, or the method of moving asymptotes (default adam)")
     p.add_argument("--lr", type=float, help="Adam learning rate (default 0.02)")
     p.add_argument("--move", type=float, help="OC move limit (default 0.05)")
+    p.add_argument("--mma-move", type=float, help="MMA move limit per step (default 0.2)")
+    p.add_argument("--frequency-min", type=float, metavar="HZ",
+                   help="MMA only: lower bound on the rod's first natural frequency in Hz (default 0 = none)")
+    p.add_argument("--mass-max", type=float, metavar="KG",
+                   help="MMA only: upper bound on the rod's mass in kg (default 0 = none)")
+    p.add_argument("--stop-change", type=float,
+                   help="stop once no variable changes by more than this in a step (default 0 = run all --iters)")
     p.add_argument("--filter-radius", type=float,
                    help="density filter radius in element sizes, 0 = off (default 1.5)")
     p.add_argument("--projection-beta", dest="beta", type=float,
@@ -71,19 +88,24 @@ def add_optimize_parser(sub) -> None:
     p.add_argument("--rtol", type=float, help="relative tolerance of the solves (default 1e-8)")
     p.add_argument("--atol", type=float,
                    help="absolute tolerance of the solves (default 1e-12; short runs have tiny elastic coordinates)")
-    p.add_argument("--no-progress", action="store_true", help="no progress line")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress report (a tqdm bar on a terminal, a line per tenth of the run otherwise)")
     p.set_defaults(func=_run)
 
 
-def _settings(args: argparse.Namespace) -> tuple[Path, dict]:
-    """The run directory and the settings: defaults < stored checkpoint (on --resume) < options."""
+def _settings(args: argparse.Namespace) -> tuple[Path, dict, set]:
+    """The run directory, the settings (defaults < stored checkpoint (on --resume) < options), and the
+    keys the stored run had (all of them for a new run)."""
     settings = dict(_DEFAULTS, case=args.case)
+    stored = set(settings)
     if args.resume is not None:
         directory = Path(args.resume)
         if args.out is not None and Path(args.out).resolve() != directory.resolve():
             raise ValueError(f"--out {args.out} and --resume {args.resume} name different directories; "
                              "a resumed run continues in its own directory.")
-        settings.update(load_checkpoint(directory / CHECKPOINT).config)
+        config = load_checkpoint(directory / CHECKPOINT).config
+        settings.update(config)
+        stored = set(config)
     else:
         directory = Path(args.out if args.out is not None else f"optimize-{args.case}")
     given = {key: getattr(args, key) for key in _DEFAULTS if getattr(args, key) is not None}
@@ -94,7 +116,26 @@ def _settings(args: argparse.Namespace) -> tuple[Path, dict]:
                 f"--{key.replace('_', '-')} {settings[key]}" for key in differ) + "; leave these options out "
                 "or start a new run with --out.")
     settings.update(given)
-    return directory, settings
+    return directory, settings, stored
+
+
+@functools.cache
+def _problem(nx: int, ny: int, modes: int, t1: float, filter_radius: float, eta: float | None, method: str,
+             rtol: float, atol: float):
+    """`(case, filter, projection, objective)` of a setting, built once per process.
+
+    Runs in one process with the same case and objective settings (tests, notebooks, a resumed run
+    after a finished one) share the objective function, and so its compiled program (see
+    [`make_step`][]), whatever optimizer or constraints they use.
+    """
+    import ffr_jax as fj
+    from .._io._cli import slider_crank_case
+
+    case = slider_crank_case(nx, ny, modes, t1)
+    filt = fj.DensityFilter(case.design, filter_radius)
+    projection = None if eta is None else fj.HeavisideProjection(eta, x_min=case.material.x_min)
+    fun = fj.make_objective(case, method, filter=filt, projection=projection, rtol=rtol, atol=atol)
+    return case, filt, projection, fun
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -102,29 +143,43 @@ def _run(args: argparse.Namespace) -> int:
 
     import ffr_jax as fj
 
-    directory, s = _settings(args)
+    directory, s, stored = _settings(args)
+    # Runs stored before a setting existed resume with its default (and keep their stored config).
+    config = {key: value for key, value in s.items() if key in stored or value != _DEFAULTS.get(key)}
     if s["beta"] < 0.0:
         raise ValueError(f"--projection-beta must be >= 0 (0 = no projection), got {s['beta']}.")
-    case = fj.cases.slider_crank(nx=s["nx"], ny=s["ny"], n_modes=s["modes"], t1=s["t1"])
-    filt = fj.DensityFilter(case.design, s["filter_radius"])
-    projection, beta = None, None
+    case, filt, projection, fun = _problem(int(s["nx"]), int(s["ny"]), int(s["modes"]), float(s["t1"]),
+                                           float(s["filter_radius"]), float(s["eta"]) if s["beta"] > 0.0 else None,
+                                           s["method"], float(s["rtol"]), float(s["atol"]))
+    beta = None
     if s["beta"] > 0.0:
-        projection = fj.HeavisideProjection(s["eta"], x_min=case.material.x_min)
         beta = fj.beta_continuation(s["beta"], max(s["beta_max"], s["beta"]), every=s["beta_every"])
     constraint = fj.VolumeConstraint(s["volume"], x_min=case.material.x_min, filter=filt, projection=projection)
+    constraints = [constraint]
+    if s["optimizer"] != "mma" and (s["frequency_min"] > 0.0 or s["mass_max"] > 0.0):
+        raise ValueError(f"--frequency-min and --mass-max need --optimizer mma; {s['optimizer']} holds only the "
+                         "volume (by projection).")
+    if s["frequency_min"] > 0.0:
+        constraints.append(fj.FrequencyConstraint(case, s["frequency_min"], filter=filt, projection=projection))
+    if s["mass_max"] > 0.0:
+        constraints.append(fj.MassConstraint(case.design, s["mass_max"], filter=filt, projection=projection))
     if s["optimizer"] == "adam":
         optimizer = optax.adam(s["lr"])
-    else:
+    elif s["optimizer"] == "oc":
         optimizer = fj.optimality_criteria(constraint, move=s["move"])
-    fun = fj.make_objective(case, s["method"], filter=filt, projection=projection, rtol=s["rtol"], atol=s["atol"])
+    else:
+        optimizer = fj.MMA(case.material.x_min, 1.0, move=s["mma_move"])
     projected = "" if beta is None else f", Heaviside projection beta {s['beta']} -> {s['beta_max']} (x2 every {s['beta_every']})"
+    bounds = "".join(f", {c.name} {'>=' if isinstance(c, fj.FrequencyConstraint) else '<='} "
+                     f"{c.minimum if isinstance(c, fj.FrequencyConstraint) else c.bound:g}" for c in constraints[1:])
     print(f"optimize {s['case']}: {case.mesh.nx} x {case.mesh.ny} elements, {case.n_design} densities, "
-          f"V = {s['volume']}, {s['optimizer']}, filter radius {s['filter_radius']}{projected}, {args.iters} steps "
-          f"-> {directory}")
+          f"V = {s['volume']}{bounds}, {s['optimizer']}, filter radius {s['filter_radius']}{projected}, "
+          f"{args.iters} steps -> {directory}")
     result = optimize(
-        fun, case.initial_design(s["volume"]), optimizer, constraint, iterations=args.iters,
-        directory=directory, resume=args.resume is not None, checkpoint_every=args.checkpoint_every,
-        config=s, progress=not args.no_progress, beta=beta,
+        fun, case.initial_design(s["volume"]), optimizer, constraints if s["optimizer"] == "mma" else constraint,
+        iterations=args.iters, directory=directory, resume=args.resume is not None,
+        checkpoint_every=args.checkpoint_every, config=config, progress=not args.no_progress, beta=beta,
+        stop_change=s["stop_change"] if s["stop_change"] > 0.0 else None,
     )
     h = result.history
     # The last iterate was projected onto the volume with the last step's beta.
@@ -132,12 +187,18 @@ def _run(args: argparse.Namespace) -> int:
     x_phys = np.asarray(fj.physical_densities(result.x, filt, projection, beta_last))
     np.savez(directory / "design.npz", x=np.asarray(result.x), x_phys=x_phys, psi=h.value, volume=h.volume,
              max_change=h.change, beta=np.array(np.nan if beta_last is None else beta_last),
-             config=np.array(json.dumps(s, sort_keys=True)))
-    ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, V = {s['volume']}, {h.steps} steps")
+             config=np.array(json.dumps(s, sort_keys=True)), constraint_names=np.array(json.dumps(list(h.names))),
+             constraint_history=h.constraint_values, constraints=np.asarray(result.constraints))
+    bound = f"V = {s['volume']}" if s["optimizer"] != "mma" else f"V = {x_phys.mean():.3f} (<= {s['volume']})"
+    ax = fj.plot_design(case, x_phys, title=f"slider-crank rod, {s['optimizer']}, {bound}, {h.steps} steps")
     ax.figure.savefig(directory / "design.png", dpi=150)
     ax = fj.plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)
     if h.steps:
         print(f"psi {h.value[0]:.6e} -> {h.value[-1]:.6e} over {h.steps} steps, volume {h.volume[-1]:.6f}")
+    for line in result.descriptions:
+        print(f"  constraint at the final design: {line}")
+    if not result.feasible:
+        print("  the final design violates a constraint (see above): more steps, or bounds that admit a design")
     print(f"wrote {directory}/design.npz, design.png, convergence.png, log.csv, {CHECKPOINT}")
     return 0

@@ -1,70 +1,106 @@
 """The optimisation driver: the step loop with a log, checkpoints, resumption and progress."""
 
 import json
+import math
 import os
-import sys
-import time
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
+import numpy as np
 import optax
 
 from ._checkpoint import Checkpoint, CheckpointError, load_checkpoint, restore_opt_state, save_checkpoint
 from ._history import History
-from ._progress import progress_line
-from ._step import make_step
-from ._volume import VolumeConstraint
+from ._progress import Progress
+from ._constraint import AbstractDesignConstraint
+from ._pytree import Raveled, is_flat, raveled_objective
+from ._step import as_optimizer, evaluate_constraints, make_step
 
 CHECKPOINT = "checkpoint.npz"
 LOG = "log.csv"
-_LOG_HEADER = "iteration,psi,volume,max_change\n"
+
+
+class ConstraintViolationWarning(UserWarning):
+    """A run ended with a constraint violated: the constraint set may have no feasible design."""
 
 
 class OptimizeResult(NamedTuple):
-    """The outcome of [`optimize`][]: the final design `x`, the optimizer state and the [`History`][]."""
+    """The outcome of [`optimize`][].
+
+    - `x`: the final design; `opt_state`: the optimizer state; `history`: the [`History`][].
+    - `constraints`: `(m,)` the normalised values `g_i` of the inequality constraints at the final
+      design (empty for Adam and OC); `names`: their labels; `descriptions`: one line per
+      constraint with the constrained quantity and its bound.
+    - `feasible`: whether every `g_i <= feasibility_tolerance` at the final design.
+    """
 
     x: jax.Array
     opt_state: optax.OptState
     history: History
+    constraints: np.ndarray = np.zeros(0)
+    names: tuple[str, ...] = ()
+    descriptions: tuple[str, ...] = ()
+    feasible: bool = True
 
 
-def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constraint: VolumeConstraint, *,
-             iterations: int, directory=None, resume: bool = False, checkpoint_every: int = 10,
-             config: dict | None = None, progress: bool = True, callback: Callable | None = None,
-             beta: float | Callable[[int], float] | None = None) -> OptimizeResult:
-    """Run `iterations` steps of [`make_step`][] from `x0`, with a log, checkpoints and progress.
+def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int, directory=None,
+             resume: bool = False, checkpoint_every: int = 10, config: dict | None = None, progress: bool = True,
+             callback: Callable | None = None, beta: float | Callable[[int], float] | None = None,
+             stop_change: float | None = None, feasibility_tolerance: float = 1e-3) -> OptimizeResult:
+    """Run up to `iterations` steps of [`make_step`][] from `x0`, with a log, checkpoints and progress.
 
-    The start design is `x_0 = P(x0)` (the projection onto the volume constraint). With a
-    `directory`, every step appends `iteration, psi, volume, max_change` to `directory/log.csv`,
-    and every `checkpoint_every` steps (and after the last) the design, the optimizer state, the
-    iteration and the history go to `directory/checkpoint.npz`, written atomically
+    The start design is `optimizer`'s first iterate from `x0`: the projection onto the volume
+    constraint for Adam and OC, `x0` clipped to the bounds for [`MMA`][]. With a `directory`,
+    every step appends `iteration, psi, volume, max_change` and one column `g_<name>` per
+    inequality constraint (its normalised value at the step's start design) to
+    `directory/log.csv`, and every `checkpoint_every` steps (and after the last) the design, the
+    optimizer state (for MMA: `x_{k-1}`, `x_{k-2}`, the asymptotes), the iteration and the history
+    of the objective and of every constraint go to `directory/checkpoint.npz`, written atomically
     ([`save_checkpoint`][]). `resume=True` continues from that checkpoint: the steps are
     deterministic, so the iterates are those of an uninterrupted run, bit for bit.
 
+    At the end the constraints are evaluated at the final design; if one is violated by more than
+    `feasibility_tolerance` a [`ConstraintViolationWarning`][] names it (the result's `feasible` is
+    then `False`). A NaN or infinite objective, constraint or design stops the run with an error
+    that names the step (the last checkpoint is kept).
+
     **Arguments:**
     - `fun`: `x -> (value, grad)` ([`make_objective`][] or any other).
-    - `x0`: `(n_design,)` start design; `optimizer`: any `optax.GradientTransformation`;
-      `constraint`: the [`VolumeConstraint`][].
+    - `x0`: `(n_design,)` start design, or a dict `{body name: (n_b,)}` (a [`DesignMap`][]'s
+      design of several bodies): flattened for the loop (`jax.flatten_util.ravel_pytree`, bodies
+      in sorted name order; the checkpoint stores the flat vector, `callback` gets the dict), `fun` and the constraints are given the dict, and the result's `x` is a dict.
+      Needs [`MMA`][]; a constraint on one body is [`OnBody`][], a volume shared by the bodies a
+      [`VolumeConstraint`][] with a dict of filters.
+    - `optimizer`: an `optax.GradientTransformation` (Adam, [`optimality_criteria`][]) or [`MMA`][].
+    - `constraints`: for an optax optimizer the [`VolumeConstraint`][] it projects onto; for MMA
+      one constraint or a sequence ([`VolumeConstraint`][], [`MassConstraint`][],
+      [`FrequencyConstraint`][], [`FunctionConstraint`][]).
     - `iterations`: total number of steps of the run (a resumed run counts the earlier ones).
     - `directory`: where the log and the checkpoints go (created if needed); `None` writes nothing.
     - `resume`: continue the run stored in `directory`.
     - `checkpoint_every`: steps between checkpoints.
     - `config`: JSON-serialisable settings that define the run (stored in each checkpoint; a
-      resume with different settings is refused).
-    - `progress`: draw a progress line on standard error.
+      resume with different settings is refused, and so is one with other constraints).
+    - `progress`: show progress on standard error (a tqdm bar on a terminal, plain lines otherwise).
     - `callback`: called as `callback(iteration, x, info)` after each step.
-    - `beta`: the sharpness of the constraint's and `fun`'s [`HeavisideProjection`][], if they
+    - `beta`: the sharpness of the constraints' and `fun`'s [`HeavisideProjection`][], if they
       have one: a number, or a schedule `k -> beta_k` such as [`beta_continuation`][] (step `k`
       runs with `beta_k`; the start design is projected with `beta_0`). A schedule is a function
       of `k` alone, so a resumed run repeats the uninterrupted one.
+    - `stop_change`: stop early once a step changes no variable by more than this (top88's 0.01);
+      the test looks at the logged history only, so a resumed run stops where the uninterrupted
+      one did.
+    - `feasibility_tolerance`: the largest normalised violation `g_i` still called feasible.
 
     **Returns:** an [`OptimizeResult`][].
 
     **Raises:** [`CheckpointError`][] when `resume` finds no readable checkpoint or one from
-    other settings, or when a fresh run would overwrite one.
+    other settings, or when a fresh run would overwrite one; `FloatingPointError` on a NaN.
     """
     if iterations < 0:
         raise ValueError(f"iterations must be >= 0, got {iterations}.")
@@ -74,14 +110,34 @@ def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constra
         raise ValueError("resume=True needs the directory of the run to resume.")
     config = json.loads(json.dumps(config or {}, sort_keys=True))
     beta_of = _beta_schedule(beta)
+    unravel = None
+    if not is_flat(x0):  # a design of several bodies: one flat vector inside the loop
+        x0, unravel = ravel_pytree(jax.tree.map(lambda a: jnp.asarray(a, dtype=jnp.float64), x0))
+        fun = raveled_objective(fun, unravel)
+        if isinstance(constraints, AbstractDesignConstraint):
+            constraints = (constraints,)
+        constraints = tuple(Raveled(c, unravel) for c in (constraints or ()))
+        if isinstance(optimizer, optax.GradientTransformation):
+            raise ValueError("A design of several bodies (a dict) needs fj.MMA(): the volume projection of Adam "
+                             "and OC holds the volume of one design vector.")
+        if callback is not None:
+            user_callback = callback
 
-    x = constraint.project(jnp.asarray(x0, dtype=jnp.float64), beta_of(0))
+            def callback(k, x, info):
+                user_callback(k, unravel(x), info)
+    optimizer, constraints = as_optimizer(optimizer, constraints)
+    names = _unique_names(constraints)
+
+    x = optimizer.start(jnp.asarray(x0, dtype=jnp.float64), beta_of(0))
     opt_state = optimizer.init(x)
-    history = History.empty()
+    history = History.empty(names)
     directory = None if directory is None else Path(directory)
     if resume:
         checkpoint = load_checkpoint(directory / CHECKPOINT)
         _check_config(checkpoint.config, config)
+        if checkpoint.history.names != names:
+            raise CheckpointError(f"Cannot resume: the run was made with the constraints "
+                                  f"{list(checkpoint.history.names)}, now {list(names)}.")
         if checkpoint.x.shape != x.shape:
             raise CheckpointError(f"The checkpoint's design has shape {checkpoint.x.shape}, this run's {x.shape}.")
         x = jnp.asarray(checkpoint.x)
@@ -99,30 +155,86 @@ def optimize(fun: Callable, x0, optimizer: optax.GradientTransformation, constra
     if directory is not None:
         _write_log(directory / LOG, history)
         log = open(directory / LOG, "a")
-    step = make_step(fun, optimizer, constraint)
+    step = make_step(fun, optimizer, constraints)
+    bar = Progress(iterations, history.steps, progress)
     try:
         for k in range(history.steps, iterations):
-            start = time.perf_counter()
+            if stop_change is not None and history.steps and history.change[-1] <= stop_change:
+                if log is not None and history.steps % checkpoint_every:  # keep the last step
+                    _save(directory, history.steps, x, opt_state, history, config)
+                break
             x_new, opt_state, info = step(x, opt_state, beta_of(k))
             value, volume, change = float(info.value), float(info.volume), float(info.change)
-            seconds = time.perf_counter() - start
+            g = np.asarray(info.constraints, dtype=float)
+            _check_finite(k, value, g, names, x_new, history.steps)
             x = x_new
-            history = history.append(value, volume, change)
+            history = history.append(value, volume, change, g)
             if log is not None:
-                log.write(_log_row(k, value, volume, change))
+                log.write(_log_row(k, value, volume, change, g))
                 log.flush()
                 if (k + 1) % checkpoint_every == 0 or k + 1 == iterations:
                     _save(directory, k + 1, x, opt_state, history, config)
             if callback is not None:
                 callback(k, x, info)
-            if progress:
-                _draw(k + 1, iterations, value, volume, change, seconds)
+            bar.update(k + 1, _postfix(value, volume, change, g))
     finally:
         if log is not None:
             log.close()
-        if progress and sys.stderr.isatty():
-            sys.stderr.write("\n")
-    return OptimizeResult(x, opt_state, history)
+        bar.close()
+    result = _finish(x, opt_state, history, constraints, names, beta_of(max(history.steps - 1, 0)),
+                     feasibility_tolerance)
+    return result if unravel is None else result._replace(x=unravel(result.x))
+
+
+def _finish(x, opt_state, history, constraints, names, beta, tolerance) -> OptimizeResult:
+    """The constraints at the final design, a warning for each violated one, and the result."""
+    if not constraints:
+        return OptimizeResult(x, opt_state, history)
+    g = np.asarray(jax.jit(lambda x, beta: evaluate_constraints(constraints, x, beta)[0])(x, beta), dtype=float)
+    descriptions = tuple(c.describe(float(v)) for c, v in zip(constraints, g, strict=True))
+    feasible = bool(np.all(g <= tolerance))
+    if not feasible:
+        violated = [f"{name}: {text}" for name, text, v in zip(names, descriptions, g, strict=True) if v > tolerance]
+        warnings.warn(
+            f"The run ended with {len(violated)} constraint(s) violated by more than {tolerance:g} (normalised): "
+            + "; ".join(violated) + ". Either more iterations are needed, or the constraints admit no design "
+            "together (check that the bounds do not contradict each other).",
+            ConstraintViolationWarning, stacklevel=3,
+        )
+    return OptimizeResult(x, opt_state, history, g, names, descriptions, feasible)
+
+
+def _unique_names(constraints) -> tuple[str, ...]:
+    names, seen = [], {}
+    for c in constraints:
+        base = "".join(ch if ch.isalnum() or ch in "_-" else "_" for ch in c.name) or "g"
+        seen[base] = seen.get(base, 0) + 1
+        names.append(base if seen[base] == 1 else f"{base}_{seen[base]}")
+    return tuple(names)
+
+
+def _check_finite(k, value, g, names, x_new, saved_steps):
+    bad = []
+    if not math.isfinite(value):
+        bad.append(f"psi = {value}")
+    bad += [f"g_{name} = {v}" for name, v in zip(names, g, strict=True) if not math.isfinite(v)]
+    if not bool(jnp.all(jnp.isfinite(x_new))):
+        bad.append("the updated design has non-finite entries")
+    if bad:
+        raise FloatingPointError(
+            f"Step {k} of the optimisation produced " + ", ".join(bad) + ". The objective or a constraint cannot be "
+            "evaluated at this design (e.g. a failed solve or a singular modal analysis); the run stops here. "
+            f"The last checkpoint (if any) holds an earlier iterate; {saved_steps} step(s) were complete."
+        )
+
+
+def _postfix(value, volume, change, g) -> str:
+    text = f"psi {value:.4e}"
+    if not math.isnan(volume):
+        text += f" V {volume:.4f}"
+    if g.size:
+        text += f" max g {g.max():+.2e}"
+    return text + f" change {change:.2e}"
 
 
 def _beta_schedule(beta) -> Callable:
@@ -148,26 +260,22 @@ def _check_config(stored: dict, given: dict) -> None:
         raise CheckpointError(f"Cannot resume: the run's settings differ from the checkpoint's ({details}).")
 
 
-def _log_row(k: int, value: float, volume: float, change: float) -> str:
-    return f"{k},{value!r},{volume!r},{change!r}\n"
+def _log_header(names) -> str:
+    return "iteration,psi,volume,max_change" + "".join(f",g_{name}" for name in names) + "\n"
+
+
+def _log_row(k: int, value: float, volume: float, change: float, g=()) -> str:
+    return f"{k},{value!r},{volume!r},{change!r}" + "".join(f",{float(v)!r}" for v in g) + "\n"
 
 
 def _write_log(path: Path, history: History) -> None:
     """(Re)write the log from a history, atomically (a resumed run drops rows past its checkpoint)."""
     tmp = path.with_name(f".{path.name}.tmp")
+    g = history.constraint_values
     with open(tmp, "w") as f:
-        f.write(_LOG_HEADER)
-        for k, row in enumerate(zip(*history, strict=True)):
-            f.write(_log_row(k, *(float(v) for v in row)))
+        f.write(_log_header(history.names))
+        for k in range(history.steps):
+            f.write(_log_row(k, float(history.value[k]), float(history.volume[k]), float(history.change[k]), g[k]))
         f.flush()
         os.fsync(f.fileno())
     os.replace(tmp, path)
-
-
-def _draw(done, total, value, volume, change, seconds):
-    line = progress_line(done, total, value, volume, change, seconds)
-    if sys.stderr.isatty():
-        sys.stderr.write("\r" + line)
-    elif done == total or done % max(1, total // 10) == 0:
-        sys.stderr.write(line + "\n")
-    sys.stderr.flush()

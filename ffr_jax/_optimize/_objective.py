@@ -8,27 +8,36 @@ from .. import _api
 from .._case import Case
 from .._sensitivity._base import AbstractSensitivity
 from .._design.filter import DensityFilter
+from ._conditions import OperatingConditions
 from ._projection import HeavisideProjection
 
 
-def physical_densities(x, filter: DensityFilter | None, projection: HeavisideProjection | None, beta=None):
+def physical_densities(x, filter: DensityFilter | dict[str, DensityFilter] | None,
+                       projection: HeavisideProjection | None, beta=None):
     """The physical densities of a design: `P_beta(H x)`, `H x`, `P_beta(x)` or `x` (whichever map is given).
 
     **Arguments:**
-    - `x`: `(n_design,)` design; `filter`: a [`DensityFilter`][] or `None`;
+    - `x`: `(n_design,)` design (or a dict by body); `filter`: a [`DensityFilter`][], a dict of
+      them by body (for a dict design), or `None`;
       `projection`: a [`HeavisideProjection`][] or `None`; `beta`: its sharpness (needed with a projection).
 
     **Returns:** `(n_design,)` physical densities.
     """
-    x_filtered = x if filter is None else filter(x)
+    if isinstance(filter, dict):  # a design of several bodies, one filter each
+        if not isinstance(x, dict) or set(x) != set(filter):
+            raise ValueError(f"The filters are given for the bodies {sorted(filter)}: pass the design as a dict with "
+                             f"these keys, got {sorted(x) if isinstance(x, dict) else type(x).__name__}.")
+        x_filtered = {name: filter[name](x[name]) for name in x}
+    else:
+        x_filtered = x if filter is None else filter(x)
     if projection is None:
         return x_filtered
     if beta is None:
         raise ValueError("A Heaviside projection needs its sharpness: pass beta (e.g. from fj.beta_continuation).")
-    return projection(x_filtered, beta)
+    return jax.tree.map(lambda u: projection(u, beta), x_filtered)
 
 
-def filtered_objective(fun: Callable, filter: DensityFilter | None,
+def filtered_objective(fun: Callable, filter: DensityFilter | dict[str, DensityFilter] | None,
                        projection: HeavisideProjection | None = None) -> Callable:
     """An objective of the design through a density filter (and projection), with its gradient pulled back.
 
@@ -51,6 +60,10 @@ def filtered_objective(fun: Callable, filter: DensityFilter | None,
             return fun
 
         def fun_of_design(x):
+            if isinstance(filter, dict):  # one filter per body of a dict design
+                x_phys, pullback = jax.vjp(lambda x: physical_densities(x, filter, None), x)
+                value, grad = fun(x_phys)
+                return value, pullback(grad)[0]
             value, grad = fun(filter(x))
             return value, filter.transpose(grad)
 
@@ -64,9 +77,9 @@ def filtered_objective(fun: Callable, filter: DensityFilter | None,
     return fun_of_projected_design
 
 
-def make_objective(case: Case, method: str | AbstractSensitivity = "adjoint",
-                   filter: DensityFilter | None = None, projection: HeavisideProjection | None = None,
-                   **kwargs) -> Callable:
+def make_objective(case: Case | OperatingConditions, method: str | AbstractSensitivity = "adjoint",
+                   filter: DensityFilter | dict[str, DensityFilter] | None = None,
+                   projection: HeavisideProjection | None = None, **kwargs) -> Callable:
     """The objective of a case as a pure function `x -> (psi, grad psi)` for an optax loop.
 
     `psi` is the case's integral objective (REFERENCE_CASE §4) of the physical densities
@@ -75,10 +88,11 @@ def make_objective(case: Case, method: str | AbstractSensitivity = "adjoint",
     it runs under `jax.jit` (compile it once, e.g. inside [`make_step`][]) and `jax.vmap`.
 
     **Arguments:**
-    - `case`: e.g. `ffr_jax.cases.slider_crank(nx=12, ny=2, n_modes=3, t1=0.2)`.
+    - `case`: e.g. `ffr_jax.cases.slider_crank(nx=12, ny=2, n_modes=3, t1=0.2)`, or
+      [`OperatingConditions`][] (several crank speeds or loads as one batched solve).
     - `method`: sensitivity method of `ffr_jax.value_and_grad`: `"adjoint"` (default),
       `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`, or a configured method object.
-    - `filter`: a [`DensityFilter`][] or `None`.
+    - `filter`: a [`DensityFilter`][], a dict of them by body (for a dict design), or `None`.
     - `projection`: a [`HeavisideProjection`][] after the filter, or `None`; with one the
       function is `fun(x, beta)`, `x_phys = P_beta(H x)`.
     - `**kwargs`: passed on to `ffr_jax.value_and_grad`, e.g. `rtol=1e-8, atol=1e-10`.
@@ -92,8 +106,11 @@ def make_objective(case: Case, method: str | AbstractSensitivity = "adjoint",
     ```
     """
     method = _api.sensitivity_method(method)  # an unknown name fails here, not at the first step
-
-    def fun(x):
-        return _api.value_and_grad(case, x, method, **kwargs)
+    if isinstance(case, OperatingConditions):
+        def fun(x):
+            return case.value_and_grad(x, method, **kwargs)[:2]
+    else:
+        def fun(x):
+            return _api.value_and_grad(case, x, method, **kwargs)
 
     return filtered_objective(fun, filter, projection)

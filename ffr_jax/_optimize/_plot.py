@@ -34,24 +34,61 @@ def plot_design(case: Case, x_phys, ax=None, *, title: str | None = None):
 
 
 def plot_history(history: History, ax=None):
-    """Draw `psi` per iteration (log scale) and the largest design change (right axis).
+    """Draw `psi` per iteration (log scale when positive) and the largest design change (right
+    axis); when the run had inequality constraints, their normalised values `g_i` in a second
+    panel below (the feasible side `g <= 0` shaded).
 
     **Arguments:**
-    - `history`: a run's [`History`][]; `ax`: a matplotlib `Axes` (a new figure when `None`).
+    - `history`: a run's [`History`][].
+    - `ax`: a matplotlib `Axes` for `psi` (a new figure when `None`; the constraint panel is only
+      drawn in a new figure, see [`plot_constraints`][] to draw it elsewhere).
 
-    **Returns:** the `Axes` of `psi`.
+    **Returns:** the `Axes` of `psi` (its `.figure` holds both panels).
     """
     from matplotlib.figure import Figure
 
+    g = history.constraint_values
     if ax is None:
-        ax = Figure(figsize=(6, 3.5), layout="constrained").subplots()
+        if g.shape[1]:
+            figure = Figure(figsize=(6.5, 6), layout="constrained")
+            ax, below = figure.subplots(2, 1, sharex=True)
+            plot_constraints(history, below)
+        else:
+            ax = Figure(figsize=(6, 3.5), layout="constrained").subplots()
     k = np.arange(history.steps)
     ax.plot(k, history.value, "C0.-", label="psi")
-    if np.all(history.value > 0):
+    if history.steps and np.all(history.value > 0):
         ax.set_yscale("log")
     ax.set_xlabel("iteration")
     ax.set_ylabel("psi", color="C0")
     right = ax.twinx()
     right.semilogy(k, np.maximum(history.change, 1e-16), "C1.-", label="max change")
     right.set_ylabel("max |x_new - x|", color="C1")
+    return ax
+
+
+def plot_constraints(history: History, ax=None):
+    """Draw every constraint's normalised value `g_i(x_k)` per iteration, with the bound `g = 0`.
+
+    `g = value / bound - 1` for an upper bound, `1 - value / bound` for a lower one, so the curves
+    read as the relative distance to each bound (a symmetric-log axis keeps both the large start
+    values and the approach to zero visible).
+
+    **Returns:** the `Axes`.
+    """
+    from matplotlib.figure import Figure
+
+    if ax is None:
+        ax = Figure(figsize=(6.5, 3.5), layout="constrained").subplots()
+    g = history.constraint_values
+    k = np.arange(history.steps)
+    for i, name in enumerate(history.names):
+        ax.plot(k, g[:, i], ".-", color=f"C{i + 2}", label=f"g_{name}")
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.axhspan(ax.get_ylim()[0] if g.size and g.min() < 0 else -1e-3, 0.0, color="0.9", zorder=0)
+    ax.set_yscale("symlog", linthresh=1e-3)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("g (feasible <= 0)")
+    if history.names:
+        ax.legend(loc="best", fontsize="small")
     return ax

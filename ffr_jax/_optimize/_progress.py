@@ -1,21 +1,42 @@
-"""A plain-text progress line (no dependency; the driver decides where it goes)."""
+"""Progress of a run through tqdm: a live bar on a terminal, a plain line every tenth of the run otherwise."""
+
+import sys
+import time
+
+from tqdm.auto import tqdm
 
 
-def progress_line(done: int, total: int, value: float, volume: float, change: float, seconds: float,
-                  width: int = 24) -> str:
-    """One line such as `[#########.......]  12/50  psi 1.234e-07  V 0.5000  change 3.1e-02  0.41 s/it`.
+class Progress:
+    """Report completed steps of a run on standard error.
+
+    On a terminal a `tqdm` bar with the last step's numbers as its postfix; when standard error is
+    not a terminal (a log file, CI), carriage returns would pile up, so the same text as the bar
+    (`tqdm.format_meter`) is written as one line at every tenth of the run and at its end.
 
     **Arguments:**
-    - `done`, `total`: completed and planned steps.
-    - `value`, `volume`, `change`: the last step's [`StepInfo`][] as floats.
-    - `seconds`: wall time of the last step.
-    - `width`: characters of the bar.
-
-    **Returns:** the line, without a line break.
+    - `total`: planned steps; `initial`: steps done before (a resumed run); `enabled`: report at all.
     """
-    filled = width if total <= 0 else min(width, (width * done) // total)
-    digits = len(str(total))
-    return (
-        f"[{'#' * filled}{'.' * (width - filled)}] {done:>{digits}}/{total}  psi {value:.4e}  "
-        f"V {volume:.4f}  change {change:.2e}  {seconds:.2f} s/it"
-    )
+
+    def __init__(self, total: int, initial: int, enabled: bool):
+        self.total, self.initial, self.enabled = total, initial, enabled
+        self.tty = enabled and sys.stderr.isatty()
+        self.start = time.perf_counter()
+        self.bar = tqdm(total=total, initial=initial, file=sys.stderr, unit="step", dynamic_ncols=True,
+                        disable=not self.tty, leave=True)
+
+    def update(self, done: int, postfix: str) -> None:
+        """Record that `done` steps are complete; `postfix`: the last step's numbers."""
+        if not self.enabled:
+            return
+        if self.tty:
+            self.bar.set_postfix_str(postfix, refresh=False)
+            self.bar.update(1)
+            return
+        if done == self.total or done % max(1, self.total // 10) == 0:
+            line = tqdm.format_meter(done, self.total, time.perf_counter() - self.start, unit="step",
+                                     initial=self.initial, postfix=postfix, ncols=120)
+            sys.stderr.write(line + "\n")
+            sys.stderr.flush()
+
+    def close(self) -> None:
+        self.bar.close()

@@ -5,13 +5,14 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._typing import Design, Scalar
+from .._typing import Design, Designs, Scalar
 from .._design.filter import DensityFilter
+from ._constraint import AbstractDesignConstraint, status
 from ._projection import HeavisideProjection
 
 
-class VolumeConstraint(eqx.Module):
-    """The feasible designs `{x : x_min <= x <= 1, mean(c x) = V}`.
+class VolumeConstraint(AbstractDesignConstraint):
+    """The feasible designs `{x : x_min <= x <= 1, mean(c x) = V}`, or the inequality `mean(c x) <= V`.
 
     `c` are the volume weights of the design variables. Without a filter `c = 1` and the
     constraint is `mean(x) = V`. With a density filter `c = H^T 1`, so that the constraint holds
@@ -26,21 +27,27 @@ class VolumeConstraint(eqx.Module):
     **Arguments:**
     - `volume`: the target fraction `V`, in `(x_min, 1]`.
     - `x_min`: the lower bound of the densities (REFERENCE_CASE §1: 0.01; `case.material.x_min`).
-    - `filter`: the [`DensityFilter`][] between design and physical densities, if any.
+    - `filter`: the [`DensityFilter`][] between design and physical densities, if any; a dict
+      `{body: DensityFilter}` for a design of several bodies (a dict by body) whose volume they
+      share: `sum_b a_b . P(H_b x_b) / sum_b sum(a_b)` (`a_b` the element areas), an inequality
+      for [`MMA`][] (a bound per body: [`OnBody`][] around a one-body constraint).
     - `projection`: the [`HeavisideProjection`][] after the filter, if any.
     - `iterations`: bisection steps of [`VolumeConstraint.project`][] (100 reach the float64
       resolution of the multiplier from any bracket the design can produce).
+    - `name`: the label of the constraint in logs and plots.
     """
 
     volume: float = eqx.field(static=True)
     x_min: float = eqx.field(static=True)
     iterations: int = eqx.field(static=True)
-    weights: Float[Array, " n_design"] | None
-    filter: DensityFilter | None
+    weights: Float[Array, " n_design"] | dict[str, Float[Array, " _n"]] | None
+    filter: DensityFilter | dict[str, DensityFilter] | None
     projection: HeavisideProjection | None
+    name: str = eqx.field(static=True)
 
-    def __init__(self, volume: float, *, x_min: float = 0.01, filter: DensityFilter | None = None,
-                 projection: HeavisideProjection | None = None, iterations: int = 100):
+    def __init__(self, volume: float, *, x_min: float = 0.01,
+                 filter: DensityFilter | dict[str, DensityFilter] | None = None,
+                 projection: HeavisideProjection | None = None, iterations: int = 100, name: str = "volume"):
         if not 0.0 < x_min < 1.0:
             raise ValueError(f"x_min must lie in (0, 1), got {x_min}.")
         if not x_min < volume <= 1.0:
@@ -53,9 +60,17 @@ class VolumeConstraint(eqx.Module):
         self.iterations = int(iterations)
         if projection is not None and projection.x_min != self.x_min:
             raise ValueError(f"The projection's x_min {projection.x_min} differs from the constraint's {self.x_min}.")
-        self.weights = None if filter is None else filter.volume_weights()
+        if isinstance(filter, dict):
+            # Several bodies sharing one volume: mean(c x) over all their design variables is the
+            # area fraction sum_b a_b . (H_b x_b) / sum_b sum(a_b), so c_b = N H_b^T a_b / sum(a).
+            total = sum(float(jnp.sum(f.areas)) for f in filter.values())
+            count = sum(int(f.areas.shape[0]) for f in filter.values())
+            self.weights = {name: count * f.transpose(f.areas) / total for name, f in filter.items()}
+        else:
+            self.weights = None if filter is None else filter.volume_weights()
         self.filter = filter
         self.projection = projection
+        self.name = name
 
     def _check_beta(self, beta):
         if self.projection is not None and beta is None:
@@ -63,14 +78,35 @@ class VolumeConstraint(eqx.Module):
         if self.projection is None and beta is not None:
             raise ValueError("beta was given, but this volume constraint has no projection.")
 
-    def fraction(self, x: Design, beta: Scalar | float | None = None) -> Scalar:
+    def fraction(self, x: Designs, beta: Scalar | float | None = None) -> Scalar:
         """The volume fraction of a design's physical densities: `mean(c x)`, or `mean(P_beta(H x))`
         with a projection."""
         self._check_beta(beta)
+        if isinstance(self.filter, dict):
+            return self._shared_fraction(x, beta)
         if self.projection is not None:
             x_filtered = x if self.filter is None else self.filter(x)
             return jnp.mean(self.projection(x_filtered, beta))
         return jnp.mean(x if self.weights is None else self.weights * x)
+
+    def _shared_fraction(self, x, beta):
+        """The area fraction of the physical densities of several bodies (`x` and `filter` dicts by body)."""
+        if not isinstance(x, dict) or set(x) != set(self.filter):
+            raise ValueError(f"This volume is shared by the bodies {sorted(self.filter)}: pass their design as a dict "
+                             f"with exactly these keys, got {sorted(x) if isinstance(x, dict) else type(x).__name__}.")
+        if self.projection is None:
+            count = sum(w.shape[0] for w in self.weights.values())
+            return sum(jnp.sum(self.weights[b] * x[b]) for b in sorted(x)) / count
+        area = sum(jnp.sum(f.areas) for f in self.filter.values())
+        return sum(jnp.sum(self.filter[b].areas * self.projection(self.filter[b](x[b]), beta)) for b in sorted(x)) / area
+
+    def value_and_grad(self, x: Designs, beta: Scalar | float | None = None):
+        """`(g, dg/dx)` of the inequality `g(x) = fraction(x) / V - 1 <= 0`."""
+        fraction, grad = jax.value_and_grad(lambda x: self.fraction(x, beta))(x)
+        return fraction / self.volume - 1.0, jax.tree.map(lambda g: g / self.volume, grad)
+
+    def describe(self, g: float) -> str:
+        return f"volume fraction {self.volume * (1.0 + g):.6f} (bound <= {self.volume:g}): {status(g)}"
 
     def project(self, y: Design, beta: Scalar | float | None = None) -> Design:
         """Euclidean projection of `y` onto the feasible set (without a Heaviside projection).
@@ -98,6 +134,9 @@ class VolumeConstraint(eqx.Module):
         **Returns:** the feasible design, `(n_design,)` (without a projection: the closest to `y`).
         """
         self._check_beta(beta)
+        if isinstance(self.filter, dict):
+            raise ValueError("A volume shared by several bodies is an inequality for fj.MMA; the projection of Adam "
+                             "and OC holds the volume of one design vector.")
         c = jnp.ones_like(y) if self.weights is None else self.weights
 
         def x_of(lam):

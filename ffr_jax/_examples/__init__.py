@@ -1,0 +1,1 @@
+"""Published benchmark problems used to check the optimisers (not multibody cases)."""
