@@ -71,6 +71,6 @@ from ._optimize._optimizer import AbstractOptimizer as AbstractOptimizer, Projec
 from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective, physical_densities as physical_densities
 from ._optimize._pytree import OnBody as OnBody
 from ._optimize._projection import HeavisideProjection as HeavisideProjection, beta_continuation as beta_continuation
-from ._optimize._plot import plot_constraints as plot_constraints, plot_design as plot_design, plot_history as plot_history
+from ._optimize._plot import plot_constraints as plot_constraints, plot_design as plot_design, plot_designs as plot_designs, plot_history as plot_history
 from ._optimize._step import StepInfo as StepInfo, make_step as make_step
 from ._optimize._volume import VolumeConstraint as VolumeConstraint
