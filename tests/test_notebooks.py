@@ -25,3 +25,8 @@ def test_notebook_runs_at_small_size(name, monkeypatch):
     notebook = nbformat.read(path, as_version=4)
     nbclient.NotebookClient(notebook, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(path.parent)}}).execute()
+
+
+@pytest.mark.slow  # an adjoint compile and six MMA steps in a fresh kernel (minutes); issue 14's worked example
+def test_two_links_notebook_runs_at_small_size(monkeypatch):
+    test_notebook_runs_at_small_size("two_links.ipynb", monkeypatch)
