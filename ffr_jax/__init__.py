@@ -17,7 +17,7 @@ from ._design import (
     ElementOperator as ElementOperator, FEModel as FEModel, FixedDofs as FixedDofs, HingedHinged as HingedHinged,
     Interface as Interface, LanczosModes as LanczosModes, LinkMesh as LinkMesh, ModalBasis as ModalBasis,
     ModalReduction as ModalReduction, PlateWithHole as PlateWithHole, Q4 as Q4, QM6 as QM6, QuadMesh as QuadMesh,
-    SIMP as SIMP, StructuredGrid as StructuredGrid, from_meshio as from_meshio, link_with_holes as link_with_holes,
+    SIMP as SIMP, StackedDesigns as StackedDesigns, StackedFilter as StackedFilter, StructuredGrid as StructuredGrid, from_meshio as from_meshio, link_with_holes as link_with_holes,
     plate_with_hole as plate_with_hole, quad_cell_data as quad_cell_data, read_mesh as read_mesh,
     retained_eigenpairs as retained_eigenpairs, rod_domain as rod_domain, rod_joint_nodes as rod_joint_nodes,
     structured_grid as structured_grid, write_mesh as write_mesh,
@@ -72,7 +72,7 @@ from ._optimize._optimizer import AbstractOptimizer as AbstractOptimizer, Projec
 from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective, physical_densities as physical_densities
 from ._optimize._pytree import OnBody as OnBody
 from ._optimize._projection import HeavisideProjection as HeavisideProjection, beta_continuation as beta_continuation
-from ._optimize._plot import plot_constraints as plot_constraints, plot_design as plot_design, plot_history as plot_history
+from ._optimize._plot import plot_constraints as plot_constraints, plot_design as plot_design, plot_designs as plot_designs, plot_history as plot_history
 from ._optimize._step import StepInfo as StepInfo, make_step as make_step
 from ._optimize._volume import VolumeConstraint as VolumeConstraint
 

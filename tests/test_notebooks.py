@@ -12,3 +12,8 @@ from notebook_runner import run_notebook
 @pytest.mark.parametrize("name", ["figs5_6_gradient.ipynb", "work_precision.ipynb"])
 def test_notebook_runs_at_small_size(name):
     run_notebook(name)
+
+
+@pytest.mark.slow  # an adjoint compile and six MMA steps in a fresh kernel (minutes); issue 14's worked example
+def test_two_links_notebook_runs_at_small_size():
+    run_notebook("two_links.ipynb")

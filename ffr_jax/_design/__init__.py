@@ -16,4 +16,5 @@ from .body_data import body_data as body_data
 from .designed_body import DesignedBody as DesignedBody
 from .design_map import AbstractDesignMap as AbstractDesignMap, DesignMap as DesignMap
 from .filter import DensityFilter as DensityFilter
+from .stacked import StackedDesigns as StackedDesigns, StackedFilter as StackedFilter
 from .geometry import LinkMesh as LinkMesh, PlateWithHole as PlateWithHole, link_with_holes as link_with_holes, plate_with_hole as plate_with_hole, rod_domain as rod_domain, rod_joint_nodes as rod_joint_nodes

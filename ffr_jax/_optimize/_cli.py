@@ -36,7 +36,10 @@ _DEFAULTS = {
     "beta_max": 32.0,
     "beta_every": 20,
     "eta": 0.5,
+    "volume_per_body": None,
 }
+# The crank–rocker whose coupler and rocker are both designed (issue 14): its own mesh and run defaults.
+_TWO_LINKS_DEFAULTS = {"nx": 40, "ny": 4, "modes": 3, "t1": 1.0, "atol": 1e-12, "optimizer": "mma"}
 
 
 def add_optimize_parser(sub) -> None:
@@ -54,7 +57,13 @@ def add_optimize_parser(sub) -> None:
             "must agree)."
         ),
     )
-    p.add_argument("case", choices=list(SCENES), help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items()))
+    p.add_argument("case", choices=[*SCENES, "four-bar-two-links"],
+                   help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items())
+                        + "; four-bar-two-links: the crank-rocker whose coupler and rocker are both flexible and "
+                          "designed together (MMA, a filter per rod, defaults --nx 40 --ny 4 --modes 3 --t1 1)")
+    p.add_argument("--volume-per-body", dest="volume_per_body", type=float, nargs="+", metavar="V",
+                   help="four-bar-two-links: one volume bound per rod (coupler rocker) instead of the shared --volume "
+                        "(the area fraction of both rods together)")
     p.add_argument("--volume", type=float,
                    help="volume fraction V in (x_min, 1] (default 0.5): held exactly by adam and oc, "
                         "an upper bound for mma")
@@ -105,6 +114,8 @@ def _settings(args: argparse.Namespace) -> tuple[Path, dict, set]:
     """The run directory, the settings (defaults < stored checkpoint (on --resume) < options), and the
     keys the stored run had (all of them for a new run)."""
     settings = dict(_DEFAULTS, case=args.case)
+    if args.case == "four-bar-two-links":
+        settings.update(_TWO_LINKS_DEFAULTS)
     stored = set(settings)
     if args.resume is not None:
         directory = Path(args.resume)
@@ -157,6 +168,12 @@ def _run(args: argparse.Namespace) -> int:
     import ffr_jax as fj
 
     directory, s, stored = _settings(args)
+    if s["case"] == "four-bar-two-links":
+        optimize_options(s, args, directory, resume=args.resume is not None)
+        config = {key: value for key, value in s.items() if key in stored or value != _DEFAULTS.get(key)}
+        return _run_two_links(args, directory, s, config)
+    if s["volume_per_body"] is not None:
+        raise ValueError(f"--volume-per-body is for a scene with several designed bodies; {s['case']} designs one.")
     s.update(scene_settings(s["case"], s))
     optimize_options(s, args, directory, resume=args.resume is not None)
     # Runs stored before a setting existed resume with its default (and keep their stored config).
@@ -216,5 +233,59 @@ def _run(args: argparse.Namespace) -> int:
         print(f"  constraint at the final design: {line}")
     if not result.feasible:
         print("  the final design violates a constraint (see above): more steps, or bounds that admit a design")
+    print(f"wrote {directory}/design.npz, design.png, convergence.png, log.csv, {CHECKPOINT}")
+    return 0
+
+
+def _run_two_links(args: argparse.Namespace, directory: Path, s: dict, config: dict) -> int:
+    """`optimize four-bar-two-links`: coupler and rocker designed together (a dict design through MMA)."""
+    import ffr_jax as fj
+
+    unsupported = [f"--{key.replace('_', '-')}" for key in ("frequency_min", "mass_max", "beta")
+                   if s[key] != _DEFAULTS[key]]
+    if s["optimizer"] != "mma":
+        unsupported.append(f"--optimizer {s['optimizer']} (a dict design needs mma)")
+    if unsupported:
+        raise ValueError(f"four-bar-two-links does not take {', '.join(unsupported)}: it runs MMA with volume bounds "
+                         "(--volume shared, or --volume-per-body VC VR).")
+    case = fj.cases.four_bar_two_links(int(s["nx"]), int(s["ny"]), int(s["modes"]), float(s["t1"]))
+    names = case.design_map.names
+    filters = {name: fj.DensityFilter(body, float(s["filter_radius"])) for name, body in case.design_map.bodies.items()}
+    x_min = min(body.material.x_min for body in case.design_map.bodies.values())
+    if s["volume_per_body"] is not None:
+        if len(s["volume_per_body"]) != len(names):
+            raise ValueError(f"--volume-per-body takes one fraction per designed rod {list(names)}, got "
+                             f"{s['volume_per_body']}.")
+        volumes = dict(zip(names, s["volume_per_body"]))
+        constraints = [fj.OnBody(fj.VolumeConstraint(v, x_min=x_min, filter=filters[name]), name)
+                       for name, v in volumes.items()]
+        bound = ", ".join(f"V_{name} <= {v}" for name, v in volumes.items())
+    else:
+        volumes = {name: s["volume"] for name in names}
+        constraints = [fj.VolumeConstraint(s["volume"], x_min=x_min, filter=filters)]
+        bound = f"V (both rods) <= {s['volume']}"
+    fun = fj.make_objective(case, s["method"], filter=filters, rtol=float(s["rtol"]), atol=float(s["atol"]))
+    sizes = ", ".join(f"{n} {b.mesh.nx} x {b.mesh.ny}" for n, b in case.design_map.bodies.items())
+    print(f"optimize four-bar-two-links: {sizes} elements, {case.design_map.design_sizes} densities, {bound}, mma, "
+          f"filter radius {s['filter_radius']}, {args.iters} steps -> {directory}")
+    result = optimize(fun, case.initial_design(volumes), fj.MMA(x_min, 1.0, move=s["mma_move"]), constraints,
+                      iterations=args.iters, directory=directory, resume=args.resume is not None,
+                      checkpoint_every=args.checkpoint_every, config=config, progress=not args.no_progress,
+                      stop_change=s["stop_change"] if s["stop_change"] > 0.0 else None)
+    h = result.history
+    x_phys = {name: np.asarray(v) for name, v in fj.physical_densities(result.x, filters, None).items()}
+    np.savez(directory / "design.npz", psi=h.value, config=np.array(json.dumps(s, sort_keys=True)),
+             constraint_names=np.array(json.dumps(list(h.names))), constraint_history=h.constraint_values,
+             **{f"x_{name}": np.asarray(result.x[name]) for name in names},
+             **{f"x_phys_{name}": x_phys[name] for name in names})
+    volume_text = ", ".join(f"{name} {x_phys[name].mean():.3f}" for name in names)
+    fig = fj.plot_designs(case, x_phys, title=f"four-bar-two-links, mma, {bound}, {h.steps} steps")
+    fig.savefig(directory / "design.png", dpi=150)
+    ax = fj.plot_history(h)
+    ax.figure.savefig(directory / "convergence.png", dpi=150)
+    if h.steps:
+        print(f"psi {h.value[0]:.6e} -> {h.value[-1]:.6e} over {h.steps} steps, mean density {volume_text}")
+    for line in result.descriptions:
+        print(f"  constraint at the final design: {line}")
     print(f"wrote {directory}/design.npz, design.png, convergence.png, log.csv, {CHECKPOINT}")
     return 0

@@ -8,11 +8,12 @@ from .. import _api
 from .._case import Case
 from .._sensitivity._base import AbstractSensitivity
 from .._design.filter import DensityFilter
+from .._design.stacked import StackedFilter
 from ._conditions import OperatingConditions
 from ._projection import HeavisideProjection
 
 
-def physical_densities(x, filter: DensityFilter | dict[str, DensityFilter] | None,
+def physical_densities(x, filter: DensityFilter | StackedFilter | dict[str, DensityFilter] | None,
                        projection: HeavisideProjection | None, beta=None):
     """The physical densities of a design: `P_beta(H x)`, `H x`, `P_beta(x)` or `x` (whichever map is given).
 
@@ -37,7 +38,8 @@ def physical_densities(x, filter: DensityFilter | dict[str, DensityFilter] | Non
     return jax.tree.map(lambda u: projection(u, beta), x_filtered)
 
 
-def filtered_objective(fun: Callable, filter: DensityFilter | dict[str, DensityFilter] | None,
+def filtered_objective(fun: Callable,
+                       filter: DensityFilter | StackedFilter | dict[str, DensityFilter] | None,
                        projection: HeavisideProjection | None = None) -> Callable:
     """An objective of the design through a density filter (and projection), with its gradient pulled back.
 
@@ -78,7 +80,7 @@ def filtered_objective(fun: Callable, filter: DensityFilter | dict[str, DensityF
 
 
 def make_objective(case: Case | OperatingConditions, method: str | AbstractSensitivity = "adjoint",
-                   filter: DensityFilter | dict[str, DensityFilter] | None = None,
+                   filter: DensityFilter | StackedFilter | dict[str, DensityFilter] | None = None,
                    projection: HeavisideProjection | None = None, **kwargs) -> Callable:
     """The objective of a case as a pure function `x -> (psi, grad psi)` for an optax loop.
 

@@ -38,6 +38,41 @@ def plot_design(case: Case, x_phys, ax=None, *, title: str | None = None):
     return ax
 
 
+def plot_designs(case: Case, x_phys: dict, *, title: str | None = None):
+    """Draw the physical densities of every designed rod of a case, one above the other, to scale.
+
+    **Arguments:**
+    - `case`: a case whose designed bodies are rods ([`StructuredGrid`][] meshes, e.g.
+      `ffr_jax.cases.four_bar_two_links`); `x_phys`: `{name: (n_design_b,)}` physical densities.
+    - `title`: optional figure title.
+
+    **Returns:** the matplotlib `Figure`.
+    """
+    from matplotlib.figure import Figure
+
+    names = case.design_map.names
+    missing = [n for n in names if n not in x_phys]
+    if missing:
+        raise ValueError(f"plot_designs: no densities for the designed bodies {missing}.")
+    fig = Figure(figsize=(10, 1.5 * len(names) + 0.7), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(names), 1))
+    width = max(case.design_map.bodies[n].mesh.length for n in names)
+    for ax, name in zip(axes, names):
+        body = case.design_map.bodies[name]
+        mesh = body.mesh
+        field = np.asarray(body.element_densities(np.asarray(x_phys[name]))).reshape(mesh.ny, mesh.nx)
+        image = ax.imshow(field, origin="lower", cmap="gray_r", vmin=0.0, vmax=1.0, interpolation="nearest",
+                          aspect="auto", extent=(0.0, mesh.length, -0.5 * mesh.height, 0.5 * mesh.height))
+        ax.set_xlim(0.0, width)
+        ax.set_ylabel("y [m]")
+        ax.set_title(f"{name}: mean density {float(np.mean(x_phys[name])):.3f}")
+    axes[-1].set_xlabel("x [m]")
+    fig.colorbar(image, ax=list(axes), label="density", fraction=0.03, pad=0.01)
+    if title is not None:
+        fig.suptitle(title)
+    return fig
+
+
 def plot_history(history: History, ax=None):
     """Draw `psi` per iteration (log scale when positive) and the largest design change (right
     axis); when the run had inequality constraints, their normalised values `g_i` in a second

@@ -7,6 +7,7 @@ from jaxtyping import Array, Float
 
 from .._typing import Design, Designs, Scalar
 from .._design.filter import DensityFilter
+from .._design.stacked import StackedFilter
 from ._constraint import AbstractDesignConstraint, status
 from ._projection import HeavisideProjection
 
@@ -30,7 +31,9 @@ class VolumeConstraint(AbstractDesignConstraint):
     - `filter`: the [`DensityFilter`][] between design and physical densities, if any; a dict
       `{body: DensityFilter}` for a design of several bodies (a dict by body) whose volume they
       share: `sum_b a_b . P(H_b x_b) / sum_b sum(a_b)` (`a_b` the element areas), an inequality
-      for [`MMA`][] (a bound per body: [`OnBody`][] around a one-body constraint).
+      for [`MMA`][] (a bound per body: [`OnBody`][] around a one-body constraint); or a
+      [`StackedFilter`][] for the same bodies' designs stacked into one vector (an optax loop
+      with the projection onto the shared volume).
     - `projection`: the [`HeavisideProjection`][] after the filter, if any.
     - `iterations`: bisection steps of [`VolumeConstraint.project`][] (100 reach the float64
       resolution of the multiplier from any bracket the design can produce).
@@ -41,12 +44,12 @@ class VolumeConstraint(AbstractDesignConstraint):
     x_min: float = eqx.field(static=True)
     iterations: int = eqx.field(static=True)
     weights: Float[Array, " n_design"] | dict[str, Float[Array, " _n"]] | None
-    filter: DensityFilter | dict[str, DensityFilter] | None
+    filter: DensityFilter | StackedFilter | dict[str, DensityFilter] | None
     projection: HeavisideProjection | None
     name: str = eqx.field(static=True)
 
     def __init__(self, volume: float, *, x_min: float = 0.01,
-                 filter: DensityFilter | dict[str, DensityFilter] | None = None,
+                 filter: DensityFilter | StackedFilter | dict[str, DensityFilter] | None = None,
                  projection: HeavisideProjection | None = None, iterations: int = 100, name: str = "volume"):
         if not 0.0 < x_min < 1.0:
             raise ValueError(f"x_min must lie in (0, 1), got {x_min}.")

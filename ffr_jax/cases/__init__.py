@@ -3,6 +3,7 @@
 from ._slider_crank import slider_crank as slider_crank
 from ._flexible_pendulum import flexible_pendulum as flexible_pendulum
 from ._four_bar import four_bar as four_bar
+from ._four_bar_two_links import four_bar_two_links as four_bar_two_links
 from ._rigid_slider_crank import rigid_slider_crank as rigid_slider_crank
 from ._spinning_beam import spinning_beam as spinning_beam
 from ._link_four_bar import link_body as link_body, link_four_bar as link_four_bar
