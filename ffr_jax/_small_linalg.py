@@ -124,7 +124,7 @@ def lu_solve(lu: LU, b, trans: int = 0):
         x = jnp.sum(inv[:, :, None] * x[None, :, :], axis=1)
         return x[:, 0] if vector else x
     if n > UNROLL_MAX:
-        perm_inv = jnp.zeros_like(lu.perm).at[lu.perm].set(jnp.arange(n))
+        perm_inv = jnp.zeros_like(lu.perm).at[lu.perm].set(jnp.arange(n, dtype=lu.perm.dtype))
         if trans == 0:
             x = jsl.solve_triangular(lu.lu, x[lu.perm], lower=True, unit_diagonal=True)
             x = jsl.solve_triangular(lu.lu, x, lower=False)
