@@ -28,9 +28,10 @@ import equinox as eqx
 import jax
 import jax.flatten_util
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 import jax.tree_util as jtu
 import numpy as np
+
+from .._small_linalg import lu_factor, lu_solve
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,8 +105,14 @@ def lower(rows, s: int):
 
 @jax.custom_jvp
 def _solve(matrix, lu, rhs):
-    """`matrix^-1 rhs` with `lu` the LU factors of `matrix` (computed outside, not differentiated)."""
-    return jsl.lu_solve(lu, rhs)
+    """`matrix^-1 rhs` with `lu` the LU factors of `matrix` (computed outside, not differentiated).
+
+    The factors are those of `ffr_jax._small_linalg` (unrolled elimination for small systems, LAPACK
+    with the row permutation formed once for larger ones): `jax.scipy.linalg.lu_solve` turns the
+    pivots into a permutation by a loop over the rows in every solve, which at 61 unknowns cost
+    more than the rest of the step.
+    """
+    return lu_solve(lu, rhs)
 
 
 @_solve.defjvp
@@ -114,8 +121,8 @@ def _solve_jvp(primals, tangents):
     # costs a batched LU derivative per tangent under `jax.vmap` (forward-mode sensitivities).
     matrix, lu, rhs = primals
     d_matrix, _, d_rhs = tangents
-    x = jsl.lu_solve(lu, rhs)
-    return x, jsl.lu_solve(lu, d_rhs - d_matrix @ x)
+    x = lu_solve(lu, rhs)
+    return x, lu_solve(lu, d_rhs - d_matrix @ x)
 
 
 class RosenbrockInterpolation(diffrax.AbstractLocalInterpolation):
@@ -191,7 +198,7 @@ class AbstractRosenbrock(diffrax.AbstractAdaptiveSolver):
         columns = jax.vmap(linear)(tangents_t.astype(jnp.result_type(t0)), tangents_u)  # (n + 1, n)
         jac, g_t = columns[:n].T, columns[n]
         matrix = jnp.eye(n, dtype=dtype) / tab.gamma - jac
-        lu = jsl.lu_factor(jax.lax.stop_gradient(matrix))
+        lu = lu_factor(jax.lax.stop_gradient(matrix))
 
         # Stage 1 at (t0, y0) reuses the linearisation's primal; stages 2..s run in one scan, so
         # the vector field is traced (and compiled) twice rather than s times.
