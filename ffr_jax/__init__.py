@@ -6,43 +6,56 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from . import cases as cases
-from ._api import objective as objective, simulate_case as simulate_case, value_and_grad as value_and_grad, value_and_grad_scene as value_and_grad_scene
-from ._body_data import BodyData as BodyData, flexible_body_data as flexible_body_data, rigid_body_data as rigid_body_data
-from ._case import FlexibleRodCase as FlexibleRodCase
-from ._gradient_plot import plot_gradient as plot_gradient, row_signs as row_signs
-from ._fe import RodMesh as RodMesh, mass_matrix as mass_matrix, stiffness_matrix as stiffness_matrix
+from ._api import objective as objective, simulate as simulate, simulate_case as simulate_case, value_and_grad as value_and_grad, value_and_grad_scene as value_and_grad_scene
+from ._case import Case as Case, FlexibleRodCase as FlexibleRodCase
+from ._design import (
+    DESIGN as DESIGN, SOLID as SOLID, VOID as VOID, AbstractDesignMap as AbstractDesignMap,
+    AbstractElement as AbstractElement, AbstractModalSolver as AbstractModalSolver,
+    AbstractReference as AbstractReference, AutoModes as AutoModes, Clamped as Clamped, DenseModes as DenseModes,
+    DensityFilter as DensityFilter, DesignDomain as DesignDomain, DesignedBody as DesignedBody, DesignMap as DesignMap,
+    ElementOperator as ElementOperator, FEModel as FEModel, FixedDofs as FixedDofs, HingedHinged as HingedHinged,
+    Interface as Interface, LanczosModes as LanczosModes, LinkMesh as LinkMesh, ModalBasis as ModalBasis,
+    ModalReduction as ModalReduction, PlateWithHole as PlateWithHole, Q4 as Q4, QM6 as QM6, QuadMesh as QuadMesh,
+    SIMP as SIMP, StructuredGrid as StructuredGrid, from_meshio as from_meshio, link_with_holes as link_with_holes,
+    plate_with_hole as plate_with_hole, quad_cell_data as quad_cell_data, read_mesh as read_mesh,
+    retained_eigenpairs as retained_eigenpairs, rod_domain as rod_domain, rod_joint_nodes as rod_joint_nodes,
+    structured_grid as structured_grid, write_mesh as write_mesh,
+)
+from ._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient, row_signs as row_signs
 from ._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
-from ._modes import ModalBasis as ModalBasis, hinged_modes as hinged_modes, retained_eigenpairs as retained_eigenpairs
 from ._objective._base import AbstractIntegrand as AbstractIntegrand
+from ._objective._combine import Scaled as Scaled, Sum as Sum
 from ._objective._compliance import Compliance as Compliance
 from ._objective._function import FunctionIntegrand as FunctionIntegrand
+from ._objective._kinetic_energy import KineticEnergy as KineticEnergy
+from ._objective._objective import Objective as Objective
+from ._objective._tracking import AbstractPath as AbstractPath, FixedPoint as FixedPoint, FunctionPath as FunctionPath, LinearPath as LinearPath, MarkerTracking as MarkerTracking
+from ._problem import Problem as Problem
 from ._scene._angle_driver import AngleDriver as AngleDriver
 from ._scene._applied_force import AppliedForce as AppliedForce
 from ._scene._base import AbstractConstraint as AbstractConstraint, AbstractForce as AbstractForce
 from ._scene._body import Body as Body
+from ._scene._body_data import BodyData as BodyData, rigid_body_data as rigid_body_data
 from ._scene._damping import ModalDamping as ModalDamping, RayleighDamping as RayleighDamping
 from ._scene._ground_revolute import GroundRevolute as GroundRevolute
 from ._scene._gravity import Gravity as Gravity
-from ._scene._laws import AbstractLaw as AbstractLaw, ConstantSpeedLaw as ConstantSpeedLaw, RampLaw as RampLaw
+from ._scene._laws import AbstractLaw as AbstractLaw, ConstantLaw as ConstantLaw, ConstantSpeedLaw as ConstantSpeedLaw, HarmonicLaw as HarmonicLaw, RampLaw as RampLaw
 from ._scene._point_on_line import PointOnLine as PointOnLine
 from ._scene._prescribed_point import CrankPin as CrankPin
 from ._scene._revolute import Revolute as Revolute
 from ._scene._scene import Scene as Scene
 from ._scene._spring_damper import SpringDamper as SpringDamper
+from ._scene._stiffening import GeometricStiffening as GeometricStiffening
 from ._sensitivity._adjoint import Adjoint as Adjoint
 from ._sensitivity._autodiff import Autodiff as Autodiff
 from ._sensitivity._backsolve import Backsolve as Backsolve
 from ._sensitivity._base import AbstractSensitivity as AbstractSensitivity
 from ._sensitivity._direct import Direct as Direct
 from ._sensitivity._finite_differences import FiniteDifferences as FiniteDifferences
-from ._simp import SIMP as SIMP, RodDesign as RodDesign
 from ._sharding import sharded_map as sharded_map
-from ._sparse_fe import ElementOperator as ElementOperator, sparse_mass_matrix as sparse_mass_matrix, sparse_stiffness_matrix as sparse_stiffness_matrix
-from ._sparse_modes import sparse_hinged_modes as sparse_hinged_modes
-from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state, simulate as simulate
+from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state
 from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
 from ._optimize._driver import OptimizeResult as OptimizeResult, optimize as optimize
-from ._optimize._filter import DensityFilter as DensityFilter
 from ._optimize._history import History as History
 from ._optimize._oc import optimality_criteria as optimality_criteria
 from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective, physical_densities as physical_densities

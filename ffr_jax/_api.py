@@ -1,8 +1,15 @@
-"""Top-level functions: the objective of a case and its gradient by any sensitivity method."""
+"""Top-level functions: simulate a problem, its objective and its gradient by any sensitivity method.
+
+Each public function runs a module-level `equinox.filter_jit` program, so that it is compiled on
+its first call and reused for equal array shapes and static settings (like `diffrax.diffeqsolve`):
+calling `value_and_grad(case, x)` again with another design of the same shape does not recompile.
+"""
 
 import diffrax
+import equinox as eqx
 
-from ._case import FlexibleRodCase
+from ._case import Case
+from ._problem import Problem
 from ._scene._scene import Scene
 from ._sensitivity._adjoint import Adjoint
 from ._sensitivity._autodiff import Autodiff
@@ -10,8 +17,8 @@ from ._sensitivity._backsolve import Backsolve
 from ._sensitivity._base import AbstractSensitivity
 from ._sensitivity._direct import Direct
 from ._sensitivity._finite_differences import FiniteDifferences
-from ._simulate import Trajectory, simulate
-from ._typing import Design
+from ._simulate import Trajectory, simulate as simulate_redundant, solve_minimal
+from ._typing import Designs
 
 
 METHODS = {
@@ -27,48 +34,133 @@ def sensitivity_method(method: str | AbstractSensitivity) -> AbstractSensitivity
     """Map a method name (`"adjoint"`, `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`) to its object."""
     if isinstance(method, AbstractSensitivity):
         return method
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"Unknown sensitivity method {method!r}; choose one of {sorted(METHODS)} "
                          "or pass an AbstractSensitivity instance (e.g. ffr_jax.Adjoint(rtol=1e-9)).")
     return METHODS[method]()
 
 
-def simulate_case(case: FlexibleRodCase, x: Design, *, rtol: float = 1e-10, atol: float = 1e-12,
-                  solver: diffrax.AbstractSolver | None = None, ts=None, dense: bool = False,
-                  max_steps: int = 1_000_000, adjoint: diffrax.AbstractAdjoint | None = None) -> Trajectory:
-    """Simulate a case for design `x` with its objective integrated along (see [`simulate`][])."""
-    return simulate(
-        case.model, case.scene(x), case.t0, case.t1, case.y_r0, case.z_r0,
-        integrand=case.integrand, solver=solver, rtol=rtol, atol=atol, ts=ts, dense=dense,
-        max_steps=max_steps, adjoint=adjoint, jump_ts=case.jump_ts,
+def _problem_and_method(target, x, method):
+    """`(problem, method)` for a problem target, where `x` may carry the method positionally."""
+    if x is not None:
+        if isinstance(x, (str, AbstractSensitivity)):
+            method = x
+        else:
+            raise ValueError("A Problem has no design vector: call value_and_grad(problem, method=...), or build "
+                             "a Case (problem + design map) to differentiate with respect to a design.")
+    return target, sensitivity_method(method)
+
+
+def _check_target(target) -> None:
+    if not isinstance(target, (Case, Problem)):
+        raise ValueError(f"Expected an ffr_jax.Problem or a case (e.g. ffr_jax.cases.slider_crank()), "
+                         f"got {type(target).__name__}.")
+
+
+# --- compiled programs ------------------------------------------------------------------------
+@eqx.filter_jit
+def _simulate_problem(problem, solver, rtol, atol, ts, dense, max_steps, adjoint, dt0):
+    obj = problem.objective
+    return solve_minimal(
+        problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
+        integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol, ts=ts, dense=dense,
+        max_steps=max_steps, adjoint=adjoint, jump_ts=problem.jump_ts, dt0=problem.dt0 if dt0 is None else dt0,
     )
 
 
-def objective(case: FlexibleRodCase, x: Design, *, rtol: float = 1e-10, atol: float = 1e-12,
-              solver: diffrax.AbstractSolver | None = None, max_steps: int = 1_000_000):
-    """`psi(x) = int_{t0}^{t1} F(t, y_r, p(x)) dt` of a case (REFERENCE_CASE §4: the integral compliance).
+@eqx.filter_jit
+def _simulate_case(case, x, solver, rtol, atol, ts, dense, max_steps, adjoint):
+    return _simulate_problem(case.problem_for(case.check(x)), solver, rtol, atol, ts, dense, max_steps, adjoint, None)
+
+
+@eqx.filter_jit
+def _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps):
+    return method.value_and_grad_problem(problem, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps)
+
+
+@eqx.filter_jit
+def _value_and_grad_design(case, x, method, rtol, atol, solver, max_steps):
+    return method.value_and_grad_design(case, case.check(x), rtol=rtol, atol=atol, solver=solver, max_steps=max_steps)
+
+
+@eqx.filter_jit
+def _value_and_grad_scene(problem, scene, method, rtol, atol, solver, max_steps):
+    return method.value_and_grad_scene(problem, scene, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps)
+
+
+# --- public functions -------------------------------------------------------------------------
+def simulate(target, *args, solver: diffrax.AbstractSolver | None = None, rtol: float = 1e-10, atol: float = 1e-12,
+             ts=None, dense: bool = False, max_steps: int = 1_000_000, adjoint: diffrax.AbstractAdjoint | None = None,
+             dt0: float | None = None, **kwargs) -> Trajectory:
+    """Simulate a [`Problem`][] (or a case at design `x`): `simulate(problem)`, `simulate(case, x)`.
 
     **Arguments:**
-    - `case`: e.g. `ffr_jax.cases.slider_crank()`; `x`: `(n_design,)` densities in `[x_min, 1]`.
+    - `target`: a [`Problem`][], or a case followed by its design `x`. (The older form
+      `simulate(model, scene, t0, t1, y_r0, z_r0, integrand=..., jump_ts=...)` from consistent
+      redundant initial conditions still works.)
+    - `solver`: any diffrax solver (default `Dopri8()`: the retained modes make the equations
+      mildly stiff; on the reference case explicit 5th-order `Tsit5()` needs about 18,000 steps at
+      every rtol from 1e-6 to 1e-9, its stability limit, Dopri8 4,700-6,400; benchmarks/RESULTS.md).
+    - `rtol`, `atol`: step-size control tolerances (default: the paper's 1e-10 / 1e-12).
+    - `ts`: output times (default: `t1` only); `dense`: keep the dense interpolant.
+    - `max_steps`: diffrax step budget; `adjoint`: diffrax adjoint for differentiating through it.
+
+    **Returns:** a [`Trajectory`][] with the independent and all redundant coordinates and
+    velocities at the output times, and `psi`.
+    """
+    if isinstance(target, Problem):
+        if args or kwargs:
+            raise ValueError("simulate(problem, ...) takes only keyword options (solver, rtol, atol, ts, ...).")
+        return _simulate_problem(target, solver, rtol, atol, ts, dense, max_steps, adjoint, dt0)
+    if isinstance(target, Case):
+        if len(args) != 1 or kwargs:
+            raise ValueError("simulate(case, x, ...) takes the design x and keyword options.")
+        return _simulate_case(target, args[0], solver, rtol, atol, ts, dense, max_steps, adjoint)
+    return simulate_redundant(target, *args, solver=solver, rtol=rtol, atol=atol, ts=ts, dense=dense,
+                              max_steps=max_steps, adjoint=adjoint, dt0=dt0, **kwargs)
+
+
+def simulate_case(case: Case, x: Designs, *, rtol: float = 1e-10, atol: float = 1e-12,
+                  solver: diffrax.AbstractSolver | None = None, ts=None, dense: bool = False,
+                  max_steps: int = 1_000_000, adjoint: diffrax.AbstractAdjoint | None = None) -> Trajectory:
+    """Simulate a case for design `x` with its objective integrated along (`simulate(case, x)`)."""
+    return _simulate_case(case, x, solver, rtol, atol, ts, dense, max_steps, adjoint)
+
+
+def objective(target, x: Designs | None = None, *, rtol: float = 1e-10, atol: float = 1e-12,
+              solver: diffrax.AbstractSolver | None = None, max_steps: int = 1_000_000):
+    """`psi = G(t1) + int_{t0}^{t1} F dt` of a problem, or of a case at design `x`
+    (REFERENCE_CASE §4: the integral compliance of the rod).
+
+    **Arguments:**
+    - `target`: a [`Problem`][], or a case such as `ffr_jax.cases.slider_crank()` with `x`, its
+      `(n_design,)` densities in `[x_min, 1]`.
     - `rtol`, `atol`: forward tolerances (the paper's 1e-10 / 1e-12 by default).
     - `solver`: diffrax solver (default `Dopri8()`, see [`simulate`][]).
 
     **Returns:** scalar `psi`.
     """
-    return simulate_case(case, x, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps).psi
+    _check_target(target)
+    if isinstance(target, Problem):
+        if x is not None:
+            raise ValueError("A Problem has no design vector: call objective(problem).")
+        return _simulate_problem(target, solver, rtol, atol, None, False, max_steps, None, None).psi
+    return _simulate_case(target, x, solver, rtol, atol, None, False, max_steps, None).psi
 
 
-def value_and_grad(case: FlexibleRodCase, x: Design, method: str | AbstractSensitivity = "adjoint", *,
+def value_and_grad(target, x: Designs | None = None, method: str | AbstractSensitivity = "adjoint", *,
                    rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
                    max_steps: int = 200_000):
-    """`(psi(x), grad psi(x))` of a case by the chosen sensitivity method.
+    """`(psi, grad psi)` of a case with respect to its design, or of a problem with respect to its arrays.
 
     **Arguments:**
-    - `case`: e.g. `ffr_jax.cases.slider_crank()`; `x`: `(n_design,)` densities in `[x_min, 1]`.
+    - `target`: a case such as `ffr_jax.cases.slider_crank()` followed by `x`, its designs: a
+      dict `{body name: (n_design_b,) densities}` in `[x_min, 1]`, or a flat `(n_design,)` array
+      when the case designs one body; or a [`Problem`][] (no `x`).
     - `method`: `"adjoint"` (the paper's adjoint variable method, default), `"autodiff"`
       (`jax.grad` through diffrax), `"backsolve"` (diffrax `BacksolveAdjoint`), `"direct"`
-      (forward sensitivities), `"fd"` (central differences), or a configured method object such
-      as `ffr_jax.Adjoint(rtol=1e-9, atol=1e-11)` or `ffr_jax.FiniteDifferences(step=1e-4)`.
+      (forward sensitivities), `"fd"` (central differences, designs only), or a configured method
+      object such as `ffr_jax.Adjoint(rtol=1e-9, atol=1e-11)` or `ffr_jax.FiniteDifferences(step=1e-4)`.
     - `rtol`, `atol`: forward tolerances (the paper's 1e-10 / 1e-12 by default).
     - `solver`: diffrax solver of the forward solve (default `Dopri8()`); the adjoint and backsolve
       methods integrate backward with the same solver when one is given, else with `Dopri8()`.
@@ -77,8 +169,12 @@ def value_and_grad(case: FlexibleRodCase, x: Design, method: str | AbstractSensi
       case needs about 8,000 forward and 13,000 backward steps), so the default is 200,000 rather
       than the 1,000,000 of [`objective`][]: raise it for long horizons or low-order solvers.
 
-    **Returns:** `(psi, grad)`, a scalar and an array shaped like `x`. Works under `jax.jit`
-    and `jax.vmap` (a batch of designs).
+    **Returns:** `(psi, grad)`: for a case, `grad` has the structure of `x` (a dict of arrays for a
+    dict design, one forward and one backward solve for all bodies); for a problem, a
+    pytree like the problem (`grad.scene` the derivatives with respect to every array of the
+    scene, `grad.objective` those of the objective's arrays, `grad.y0`, `grad.z0` those of the
+    initial state; `None` where a leaf is not a float array). Compiled on the first call and
+    reused for equal shapes and settings; works under `jax.vmap` (a batch of designs).
 
     **Example:**
     ```python
@@ -87,18 +183,20 @@ def value_and_grad(case: FlexibleRodCase, x: Design, method: str | AbstractSensi
     psi, grad = fj.value_and_grad(case, case.initial_design(0.5))
     ```
     """
-    x = case.design.check(x)
-    return sensitivity_method(method).value_and_grad_design(
-        case, x, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps
-    )
+    _check_target(target)
+    if isinstance(target, Problem):
+        problem, method = _problem_and_method(target, x, method)
+        return _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps)
+    return _value_and_grad_design(target, x, sensitivity_method(method), rtol, atol, solver, max_steps)
 
 
-def value_and_grad_scene(case: FlexibleRodCase, scene: Scene, method: str | AbstractSensitivity = "adjoint", *,
+def value_and_grad_scene(target, scene: Scene, method: str | AbstractSensitivity = "adjoint", *,
                          rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
                          max_steps: int = 200_000):
-    """`(psi, dpsi/dp)` with respect to every array of the scene (body data, spring constants, crank
-    radius, law coefficients, ...): a pytree like `scene`, `None` where a leaf is not a float array.
+    """`(psi, dpsi/dp)` with respect to every array of `scene` (body data, spring constants, crank
+    radius, force and law coefficients, ...), for a problem or a case whose problem is run with
+    these parameters: a pytree like `scene`, `None` where a leaf is not a float array.
     """
-    return sensitivity_method(method).value_and_grad_scene(
-        case, scene, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps
-    )
+    _check_target(target)
+    problem = target if isinstance(target, Problem) else target.problem
+    return _value_and_grad_scene(problem, scene, sensitivity_method(method), rtol, atol, solver, max_steps)

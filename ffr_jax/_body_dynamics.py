@@ -19,7 +19,7 @@ and the virtual work `sum_n delta r_n^T M rddot_n` gives `M_b(y_b) zdot_b + h_om
 
 import jax.numpy as jnp
 
-from ._body_data import BodyData
+from ._scene._body_data import BodyData
 
 
 def rotation(theta):

@@ -1,11 +1,13 @@
-"""A picture of a design gradient over the rod (matplotlib; for the CLI, notebooks and benchmarks)."""
+"""Pictures of design fields: a gradient over the rod (paper Figs. 5–6), any field over any mesh
+(matplotlib; for the CLI, notebooks and benchmarks)."""
 
 import numpy as np
 
-from ._case import FlexibleRodCase
+from ._case import Case
+from ._design.domain import SOLID, VOID
 
 
-def row_signs(case: FlexibleRodCase, grad) -> list[dict]:
+def row_signs(case: Case, grad) -> list[dict]:
     """The sign pattern of a design gradient, row by row (REFERENCE_CASE §4: outer rows negative,
     inner rows positive in the paper).
 
@@ -36,7 +38,7 @@ def row_signs(case: FlexibleRodCase, grad) -> list[dict]:
     return rows
 
 
-def plot_gradient(case: FlexibleRodCase, grad, *, title: str | None = None, figure=None):
+def plot_gradient(case: Case, grad, *, title: str | None = None, figure=None):
     """Draw a design gradient over the rod like the paper's Figs. 5–6: a surface above the design
     region of the rod's reference domain, and below it the same field as a signed colour map.
 
@@ -55,7 +57,7 @@ def plot_gradient(case: FlexibleRodCase, grad, *, title: str | None = None, figu
 
     mesh = case.mesh
     grid = case.design_grid(grad)
-    centres = case.design.design_centres().reshape(mesh.ny, mesh.nx - 2, 2)
+    centres = case.design.domain.design_centroids().reshape(mesh.ny, mesh.nx - 2, 2)
     xc, yc = centres[..., 0], centres[..., 1]
     scale = float(np.max(np.abs(grid))) or 1.0
     norm = TwoSlopeNorm(vcenter=0.0, vmin=-scale, vmax=scale)
@@ -86,3 +88,54 @@ def plot_gradient(case: FlexibleRodCase, grad, *, title: str | None = None, figu
     map_ax.set_title(f"gradient over the design region ({mesh.ny} x {mesh.nx - 2} elements), "
                      f"max |grad| = {scale:.3e}")
     return figure
+
+
+def plot_field(target, values, ax=None, *, title: str | None = None, signed: bool = False, label: str | None = None):
+    """Draw a design-ordered field over the elements of any mesh (e.g. the holed link).
+
+    Densities (`signed=False`): grey scale from 0 (white) to 1 (black), passive solid elements
+    black and passive void white. Signed fields such as gradients (`signed=True`): a diverging
+    map symmetric about zero, passive elements light grey (they carry no design variable).
+
+    **Arguments:**
+    - `target`: a case with one designed body (`case.design`) or a [`DesignedBody`][].
+    - `values`: `(n_design,)` in design order; `ax`: a matplotlib `Axes` (a new figure when `None`).
+    - `title`, `label` (colour bar): optional text.
+
+    **Returns:** the `Axes`.
+    """
+    from matplotlib.collections import PolyCollection
+    from matplotlib.colors import Normalize, TwoSlopeNorm
+    from matplotlib.figure import Figure
+
+    body = target.design if isinstance(target, Case) else target
+    domain, mesh = body.domain, body.mesh
+    values = np.asarray(values, dtype=float)
+    if values.shape != (domain.n_design,):
+        raise ValueError(f"plot_field takes a vector of shape ({domain.n_design},), got {values.shape}.")
+    roles = domain.role_array()
+    field = np.where(roles == SOLID, 1.0, 0.0 if not signed else np.nan)
+    if not signed:
+        field = np.where(roles == VOID, 0.0, field)
+    field[np.asarray(domain.design_elements)] = values
+    if signed:
+        scale = float(np.nanmax(np.abs(values))) or 1.0
+        cmap, norm = "RdBu_r", TwoSlopeNorm(vcenter=0.0, vmin=-scale, vmax=scale)
+    else:
+        cmap, norm = "gray_r", Normalize(0.0, 1.0)
+    if ax is None:
+        lo, hi = mesh.nodes.min(axis=0), mesh.nodes.max(axis=0)
+        aspect = (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-300)
+        ax = Figure(figsize=(9, max(2.0, 9 * aspect + 0.8)), layout="constrained").subplots()
+    cells = PolyCollection(mesh.element_coordinates(), array=np.ma.masked_invalid(field), cmap=cmap, norm=norm,
+                           edgecolors="face", linewidths=0.2)
+    cells.cmap.set_bad("0.85")
+    ax.add_collection(cells)
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    ax.figure.colorbar(cells, ax=ax, label=label or ("dpsi/dx_e" if signed else "density"), fraction=0.04, pad=0.01)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    if title is not None:
+        ax.set_title(title)
+    return ax

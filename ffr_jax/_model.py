@@ -46,7 +46,7 @@ def choose_partition(scene: Scene, t0, y_r0, prefer_dependent: tuple[int, ...] =
     Raises `ValueError` when `C` does not have full row rank (redundant or contradictory
     constraints, or a singular initial configuration).
     """
-    c = np.asarray(jax.jacfwd(scene.constraint_residual, argnums=1)(jnp.asarray(t0, float), jnp.asarray(y_r0)))
+    c = np.asarray(_constraint_jacobian(scene, jnp.asarray(t0, float), jnp.asarray(y_r0, float)))
     n_c, n = c.shape
     if n_c == 0:
         return Partition(independent=tuple(range(n)), dependent=())
@@ -66,6 +66,11 @@ def choose_partition(scene: Scene, t0, y_r0, prefer_dependent: tuple[int, ...] =
     dependent = tuple(sorted(dependent))
     independent = tuple(i for i in range(n) if i not in dependent)
     return Partition(independent=independent, dependent=dependent)
+
+
+@eqx.filter_jit
+def _constraint_jacobian(scene: Scene, t, y_r):
+    return jax.jacfwd(scene.constraint_residual, argnums=1)(t, y_r)
 
 
 def _zeros_for_none(primals, tangents):

@@ -16,20 +16,32 @@ from ._scene._scene import Scene
 class Trajectory(eqx.Module):
     """Result of [`simulate`][].
 
-    - `ts`: `(n_t,)` output times; `ys`, `zs`: `(n_t, f)` minimal positions and velocities there.
-    - `psi`: the integral objective at the final time (zero without an integrand).
+    - `ts`: `(n_t,)` output times; `ys`, `zs`: `(n_t, f)` minimal (independent) positions and
+      velocities there.
+    - `positions`, `velocities`: `(n_t, n_r)` all redundant coordinates `y_r` and velocities `z_r`
+      at the output times (the dependent ones from the constraints; see
+      [`Scene.coordinate_names`][] for their order). [`Trajectory.marker_positions`][] gives the
+      path of a body point.
+    - `psi`: the objective `G(t1) + int F dt` at the final time (zero without an objective).
     - `num_steps`, `num_accepted_steps`: solver statistics.
     - `solution`: the diffrax solution (its `evaluate(t)` is the dense output when requested);
-      the state is `(y, z)` or `(y, z, psi)`.
+      the state is `(y, z)` or `(y, z, int F dt)`.
     """
 
     ts: Float[Array, " n_t"]
     ys: Float[Array, "n_t f"]
     zs: Float[Array, "n_t f"]
+    positions: Float[Array, "n_t n_r"]
+    velocities: Float[Array, "n_t n_r"]
     psi: Float[Array, ""]
     num_steps: Array
     num_accepted_steps: Array
     solution: diffrax.Solution
+
+    def marker_positions(self, scene: Scene, body: int, marker: int) -> Float[Array, "n_t 2"]:
+        """Inertial positions `r_P = R + A(theta) (c_P + Phi_P q)` of marker `marker` of body `body` at
+        the output times, `(n_t, 2)` (elastic displacement included)."""
+        return jax.vmap(lambda y_r: scene.marker_position(body, marker, y_r))(self.positions)
 
 
 def consistent_minimal_state(model: MinimalModel, scene: Scene, t0, y_r0, z_r0, tol: float = 1e-8):
@@ -64,6 +76,84 @@ def consistent_minimal_state(model: MinimalModel, scene: Scene, t0, y_r0, z_r0, 
     return model.split(y_r0)[0], model.split(z_r0)[0]
 
 
+def solve_minimal(
+    model: MinimalModel,
+    scene: Scene,
+    t0: float,
+    t1: float,
+    y0,
+    z0,
+    *,
+    integrand: AbstractIntegrand | None = None,
+    terminal: AbstractIntegrand | None = None,
+    solver: diffrax.AbstractSolver | None = None,
+    rtol: float = 1e-10,
+    atol: float = 1e-12,
+    ts=None,
+    dense: bool = False,
+    max_steps: int = 1_000_000,
+    adjoint: diffrax.AbstractAdjoint | None = None,
+    jump_ts: tuple[float, ...] = (),
+    dt0: float | None = None,
+    controller: diffrax.PIDController | None = None,
+) -> Trajectory:
+    """Integrate the minimal equations of motion `(y, z)' = (z, Mbar^-1 (fbar - gammabar))` from the
+    independent initial state `(y0, z0)`, with `psi = G(t1) + int F dt` alongside.
+
+    Every array the vector field uses (those of the model, the scene and the terms) travels as
+    the solve's `args`, and only arrays: diffrax's `BacksolveAdjoint` differentiates the vector
+    field with respect to `args`, cannot close over traced arrays, and cannot carry empty tuples
+    such as `Scene.forces = ()` through its state. See [`simulate`][] for the rest.
+    """
+    solver = diffrax.Dopri8() if solver is None else solver
+    adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    dynamic, static = eqx.partition((model, scene, integrand, terminal), eqx.is_inexact_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dynamic)
+
+    def unpack(args):
+        return eqx.combine(jax.tree_util.tree_unflatten(treedef, args), static)
+
+    def field(t, state, args):
+        model, scene_, integrand_, _ = unpack(args)
+        y_r, z_r, zdot = model.state_and_accelerations(t, state[0], state[1], scene_)
+        if integrand_ is None:
+            return state[1], zdot
+        return state[1], zdot, integrand_(t, y_r, z_r, scene_)
+
+    y0, z0 = jnp.asarray(y0, float), jnp.asarray(z0, float)
+    state0 = (y0, z0) if integrand is None else (y0, z0, jnp.zeros((), y0.dtype))
+    jumps = tuple(j for j in jump_ts if t0 < j < t1)
+    if controller is None:
+        controller = diffrax.PIDController(rtol=rtol, atol=atol)
+    elif type(controller) is not diffrax.PIDController:
+        raise ValueError(f"controller= takes a diffrax.PIDController without jump_ts or step_ts "
+                         f"(the drivers' switch times are added here), got {type(controller).__name__}.")
+    controller = dataclasses.replace(controller, rtol=rtol, atol=atol, jump_ts=jnp.asarray(jumps) if jumps else None)
+    # The final state is always saved (for psi and the terminal term), beside the requested times.
+    if ts is None:
+        saveat = diffrax.SaveAt(t1=True, dense=dense)
+    else:
+        saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)], dense=dense)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field), solver, t0, t1, dt0, state0, args=leaves, saveat=saveat,
+        stepsize_controller=controller, max_steps=max_steps, adjoint=adjoint,
+    )
+    if ts is None:
+        out_ts, out, final = sol.ts, sol.ys, sol.ys
+    else:
+        (out_ts, final_ts), (out, final) = sol.ts, sol.ys
+    model, scene_, integrand_, terminal_ = unpack(leaves)
+    psi = final[2][-1] if integrand is not None else jnp.zeros((), y0.dtype)
+    if terminal is not None:
+        y_r1, z_r1 = model.state(jnp.asarray(t1, y0.dtype), final[0][-1], final[1][-1], scene_)
+        psi = psi + terminal_(jnp.asarray(t1, y0.dtype), y_r1, z_r1, scene_)
+    positions, velocities = jax.vmap(lambda t, y, z: model.state(t, y, z, scene_))(out_ts, out[0], out[1])
+    return Trajectory(
+        ts=out_ts, ys=out[0], zs=out[1], positions=positions, velocities=velocities, psi=psi,
+        num_steps=sol.stats["num_steps"], num_accepted_steps=sol.stats["num_accepted_steps"], solution=sol,
+    )
+
+
 def simulate(
     model: MinimalModel,
     scene: Scene,
@@ -85,6 +175,8 @@ def simulate(
     controller: diffrax.PIDController | None = None,
 ) -> Trajectory:
     """Integrate the minimal equations of motion from consistent redundant initial conditions.
+
+    The lower-level form of [`ffr_jax.simulate`][] (which takes a [`Problem`][]).
 
     **Arguments:**
     - `model`, `scene`: the partitioned model and the parameter pytree `p`.
@@ -108,50 +200,8 @@ def simulate(
     **Returns:** a [`Trajectory`][].
     """
     y0, z0 = consistent_minimal_state(model, scene, t0, y_r0, z_r0)
-    solver = diffrax.Dopri8() if solver is None else solver
-    adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
-
-    # Only the arrays of the scene travel as `args` (the rest is closed over): diffrax's
-    # BacksolveAdjoint cannot carry empty tuples such as `Scene.forces = ()` through its state.
-    dynamic, static = eqx.partition(scene, eqx.is_inexact_array)
-    leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-
-    def field(t, state, args):
-        scene_ = eqx.combine(jax.tree_util.tree_unflatten(treedef, args), static)
-        y_r, z_r, zdot = model.state_and_accelerations(t, state[0], state[1], scene_)
-        if integrand is None:
-            return state[1], zdot
-        return state[1], zdot, integrand(t, y_r, scene_)
-
-    state0 = (y0, z0) if integrand is None else (y0, z0, jnp.zeros((), y0.dtype))
-    jumps = tuple(j for j in jump_ts if t0 < j < t1)
-    if controller is None:
-        controller = diffrax.PIDController(rtol=rtol, atol=atol)
-    elif type(controller) is not diffrax.PIDController:
-        raise ValueError(f"simulate(controller=...) takes a diffrax.PIDController without jump_ts or step_ts "
-                         f"(the drivers' switch times are added here), got {type(controller).__name__}.")
-    controller = dataclasses.replace(controller, rtol=rtol, atol=atol, jump_ts=jnp.asarray(jumps) if jumps else None)
-    saveat = diffrax.SaveAt(t1=ts is None, ts=ts, dense=dense)
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
-        solver,
-        t0,
-        t1,
-        dt0,
-        state0,
-        args=leaves,
-        saveat=saveat,
-        stepsize_controller=controller,
-        max_steps=max_steps,
-        adjoint=adjoint,
-    )
-    psi = sol.ys[2][-1] if integrand is not None else jnp.zeros(())
-    return Trajectory(
-        ts=sol.ts,
-        ys=sol.ys[0],
-        zs=sol.ys[1],
-        psi=psi,
-        num_steps=sol.stats["num_steps"],
-        num_accepted_steps=sol.stats["num_accepted_steps"],
-        solution=sol,
+    return solve_minimal(
+        model, scene, t0, t1, y0, z0, integrand=integrand, solver=solver, rtol=rtol, atol=atol, ts=ts,
+        dense=dense, max_steps=max_steps, adjoint=adjoint, jump_ts=jump_ts, dt0=dt0,
+        controller=controller,
     )

@@ -151,11 +151,6 @@ def lu_solve(lu: LU, b, trans: int = 0):
     return x[:, 0] if vector else x
 
 
-def solve(a, b):
-    """`A^-1 b` for a general square `A` (partial pivoting)."""
-    return lu_solve(lu_factor(a), b)
-
-
 def spd_solve(a, b):
     """`A^-1 b` for a symmetric positive definite `A` (Cholesky for `n > UNROLL_MAX`).
 

@@ -65,3 +65,30 @@ def random_orthogonal(n: int, seed: int) -> np.ndarray:
     if np.linalg.det(q) > 0:
         q[:, 0] = -q[:, 0]
     return q
+
+
+def crank_arm_scene(stiffness: float = 200.0) -> ffr_jax.Scene:
+    """The README's own mechanism: a driven rigid crank, a rigid arm hanging from its pin, a
+    spring–damper from the arm's tip to the ground, a harmonic vertical force on the tip, gravity.
+
+    One degree of freedom (the arm's angle). Tests that use it share its compiled programs with the
+    README test, so keep the two identical.
+    """
+    crank = ffr_jax.Body("crank", ffr_jax.rigid_body_data(0.5, (0.025, 0.0), 0.5 * 0.1**2 / 3, [[0, 0], [0.1, 0]]))
+    arm = ffr_jax.Body("arm", ffr_jax.rigid_body_data(1.0, (0.2, 0.0), 1.0 * 0.4**2 / 3, [[0, 0], [0.4, 0]]))
+    return ffr_jax.Scene(
+        bodies=(crank, arm),
+        constraints=(
+            ffr_jax.GroundRevolute(body=0, marker=0),
+            ffr_jax.AngleDriver(body=0, angle=ffr_jax.RampLaw(t_ramp=0.5, angle_at_ramp=np.pi / 2, speed=2 * np.pi)),
+            ffr_jax.Revolute(body_i=0, marker_i=1, body_j=1, marker_j=0),
+        ),
+        forces=(
+            ffr_jax.SpringDamper(1, 1, stiffness=stiffness, damping=2.0, rest_length=0.3, ground_point=(0.3, -0.3)),
+            ffr_jax.AppliedForce(1, 1, magnitude=ffr_jax.HarmonicLaw(5.0, 2.0), direction=(0.0, 1.0)),
+            ffr_jax.Gravity(),
+        ),
+    )
+
+
+CRANK_ARM_POSITIONS = (0.0, 0.0, 0.0, 0.1, 0.0, -np.pi / 2)  # crank along x, the arm hanging down

@@ -56,8 +56,9 @@ def states(case, scene):
 
 
 def test_products_equal_the_paper_matrices(case, scene, states):
-    products = jax.jit(lambda t, y, z, mu, w: adjoint_products(case, t, y, z, scene, mu, w)[:3])
-    terms = jax.jit(lambda t, y, z: adjoint_terms(case, t, y, z, scene))
+    params = (scene, case.objective)
+    products = jax.jit(lambda t, y, z, mu, w: adjoint_products(case.problem, t, y, z, params, mu, w)[:3])
+    terms = jax.jit(lambda t, y, z: adjoint_terms(case.problem, t, y, z, params))
     for t, y, z, mu, w in states:
         lam_y, lam_z, nu = products(t, y, z, mu, w)
         m = terms(t, y, z)
@@ -80,11 +81,11 @@ def test_design_term_is_the_total_parameter_derivative(case, scene, states):
         y_r, z_r = model.state(t, y, z, s)  # dependent coordinates follow the constraints
         mbar, rhs = model.minimal_terms(t, y_r, z_r, s)
         ode = matmul(mbar, zdot) - rhs
-        return case.integrand(t, y_r, s) + jnp.sum(mu * model.split(z_r)[0]) - jnp.sum(nu * ode)
+        return case.integrand(t, y_r, z_r, s) + jnp.sum(mu * model.split(z_r)[0]) - jnp.sum(nu * ode)
 
     @jax.jit
     def both(t, y, z, mu, w):
-        _, _, nu, lam_p = adjoint_products(case, t, y, z, scene, mu, w, design=True)
+        _, _, nu, lam_p = adjoint_products(case.problem, t, y, z, (scene, case.objective), mu, w, design=True)
         zdot = model.state_and_accelerations(t, y, z, scene)[2]
         along = jax.jvp(lambda p: total(t, y, z, mu, nu, zdot, p), (flat,), (direction,))[1]
         return -jax.flatten_util.ravel_pytree(lam_p)[0] @ direction, along
@@ -104,11 +105,11 @@ def solves(case, scene):
     def run(scene):
         forward = simulate(case.model, scene, case.t0, case.t1, case.y_r0, case.z_r0, integrand=case.integrand,
                            rtol=RTOL, atol=ATOL, dense=True, jump_ts=case.jump_ts, max_steps=20_000)
-        backward = adjoint.backward_solve(case, scene, forward, max_steps=20_000)
+        backward, _ = adjoint.backward_solve(case.problem.with_scene(scene), forward, max_steps=20_000)
         return forward.solution, backward.interpolation
 
     in_ode = eqx.filter_jit(lambda s: fj.Adjoint(**BACKWARD, quadrature=None).value_and_grad_scene(
-        case, s, rtol=RTOL, atol=ATOL, solver=None, max_steps=20_000))
+        case.problem, s, rtol=RTOL, atol=ATOL, solver=None, max_steps=20_000))
     g_ode = jax.flatten_util.ravel_pytree(eqx.filter(in_ode(scene)[1], eqx.is_inexact_array))[0]
     return run(scene), np.asarray(g_ode)
 
@@ -118,7 +119,8 @@ def quadrature_gradients(case, scene, solves):
     (forward, backward), _ = solves
     out = {}
     for order in (1, 3):
-        fn = eqx.filter_jit(lambda s, f, b, order=order: _quadrature_on_steps(case, s, f, b, order, 64))
+        fn = eqx.filter_jit(lambda s, f, b, order=order: _quadrature_on_steps(
+            case.problem, (s, case.objective), f, b, order, 64))
         out[order] = np.asarray(fn(scene, forward, backward))
     return out
 
@@ -141,7 +143,7 @@ def test_paper_matrices_in_the_backward_ode_give_the_same_gradient(case, scene, 
     in the backward ODE (eq. 44) — against the default reverse-mode products, both in the ODE."""
     _, g_ode = solves
     paper = fj.Adjoint(**BACKWARD, quadrature=None, products="matrices")
-    run = eqx.filter_jit(lambda s: paper.value_and_grad_scene(case, s, rtol=RTOL, atol=ATOL, solver=None,
+    run = eqx.filter_jit(lambda s: paper.value_and_grad_scene(case.problem, s, rtol=RTOL, atol=ATOL, solver=None,
                                                               max_steps=20_000))
     g = jax.flatten_util.ravel_pytree(eqx.filter(run(scene)[1], eqx.is_inexact_array))[0]
     assert_close_relative(np.asarray(g), g_ode, 1e-9, "gradient with the paper's jacfwd matrices vs reverse-mode products")

@@ -71,7 +71,7 @@ class MeshBody:
 
 def rod_mesh_body(case, x):
     k, m = case.fe_matrices(x)
-    return MeshBody(case.mesh.node_coordinates(), m, k, case.modes(x).modes)
+    return MeshBody(case.mesh.nodes, m, k, case.modes(x).modes)
 
 
 def bar_mesh_body(data):

@@ -26,7 +26,7 @@ FD_REL_TOL = 1e-7
 
 
 def small_design(nx=12, ny=4):
-    return fj.RodDesign(fj.RodMesh(nx, ny), fj.SIMP())
+    return fj.rod_domain(nx, ny)
 
 
 def surrogate(n, seed=0):
@@ -53,7 +53,7 @@ def test_filter_rows_sum_to_one_and_reach_radius(radius):
     np.testing.assert_allclose(h.sum(axis=1), 1.0, atol=ROUND_OFF, err_msg="rows of H")
     assert np.all(h >= 0.0), "filter weights must be non-negative"
     mesh = design.mesh
-    scaled = design.design_centres() / np.array([mesh.dx, mesh.dy])
+    scaled = design.design_centroids() / np.array([mesh.dx, mesh.dy])
     distance = np.linalg.norm(scaled[:, None] - scaled[None], axis=-1)
     if radius <= 1.0:
         np.testing.assert_array_equal(h, np.eye(len(h)), err_msg="H = I for r <= 1")

@@ -278,7 +278,7 @@ def test_unknown_method_is_a_clear_error(case, x):
 
 @pytest.mark.parametrize("shape", [(NY * (NX - 2) - 1,), (NY * (NX - 2) + 2,), (NY, NX - 2)])
 def test_design_of_wrong_shape_is_a_clear_error(case, shape):
-    # A ValueError from RodDesign.check; under this suite's jaxtyping hook a 2-D array is already
+    # A ValueError from the design map's check; under this suite's jaxtyping hook a 2-D array is already
     # refused by the annotation `Float[Array, "n_design"]` (a TypeError naming `n_design`).
     message = r"Design vector has shape .* expected \(20,\)|n_design"
     with pytest.raises((ValueError, TypeError), match=message):

@@ -1,17 +1,46 @@
-"""Abstract integrand of an integral objective."""
+"""Abstract scalar term of an objective: an integrand `F` or a terminal term `G`."""
 
 import abc
 
 import equinox as eqx
+import jax.numpy as jnp
 
 
 class AbstractIntegrand(eqx.Module):
-    """The integrand `F(t, y_r, p)` of `psi = int_{t0}^{t1} F dt` (paper eq. 20).
+    """A scalar function `F(t, y_r, z_r, p)` of the time, the redundant positions and velocities
+    and the parameters `p` (the scene), used as the integrand of `psi = int_{t0}^{t1} F dt`
+    (paper eq. 20) or as the terminal term `G(t1, y_r, z_r, p)` of an [`Objective`][].
 
-    `F` may depend on the redundant positions and on any array of the scene `p`; its partial
-    derivatives are taken by JAX (`R1`, `R2` of paper eq. 25).
+    Its partial derivatives (`R1`, `R2` of paper eq. 25, and the velocity and terminal terms of
+    the extended adjoint, see [`Adjoint`][]) are taken by JAX. Terms add (`a + b`) and scale by a
+    number or a scalar array (`2.0 * a`; an array weight is a parameter that can be differentiated
+    and changed without recompiling).
     """
 
     @abc.abstractmethod
-    def __call__(self, t, y_r, scene):
-        """Scalar `F(t, y_r, p)`."""
+    def __call__(self, t, y_r, z_r, scene):
+        """Scalar `F(t, y_r, z_r, p)`."""
+
+    def __add__(self, other: "AbstractIntegrand") -> "AbstractIntegrand":
+        from ._combine import Sum
+
+        if not isinstance(other, AbstractIntegrand):
+            return NotImplemented
+        return Sum((self, other))
+
+    def __mul__(self, weight) -> "AbstractIntegrand":
+        from ._combine import Scaled
+
+        if isinstance(weight, AbstractIntegrand):
+            return NotImplemented
+        return Scaled(self, weight)
+
+    __rmul__ = __mul__
+
+
+def scalar(value, name: str):
+    """`value` as a float64 scalar array, or a `ValueError` naming the term when it is not one number."""
+    value = jnp.asarray(value, dtype=float)
+    if value.shape != ():
+        raise ValueError(f"{name} must be one number, got an array of shape {value.shape}.")
+    return value

@@ -10,7 +10,7 @@ class Compliance(AbstractIntegrand):
 
     body: int = eqx.field(static=True)
 
-    def __call__(self, t, y_r, scene):
-        del t
+    def __call__(self, t, y_r, z_r, scene):
+        del t, z_r
         q = scene.body_coordinates(self.body, y_r)[3:]
         return q @ scene.bodies[self.body].data.modal_stiffness @ q

@@ -5,9 +5,9 @@ from collections.abc import Callable
 import jax
 
 from .. import _api
-from .._case import FlexibleRodCase
+from .._case import Case
 from .._sensitivity._base import AbstractSensitivity
-from ._filter import DensityFilter
+from .._design.filter import DensityFilter
 from ._projection import HeavisideProjection
 
 
@@ -64,7 +64,7 @@ def filtered_objective(fun: Callable, filter: DensityFilter | None,
     return fun_of_projected_design
 
 
-def make_objective(case: FlexibleRodCase, method: str | AbstractSensitivity = "adjoint",
+def make_objective(case: Case, method: str | AbstractSensitivity = "adjoint",
                    filter: DensityFilter | None = None, projection: HeavisideProjection | None = None,
                    **kwargs) -> Callable:
     """The objective of a case as a pure function `x -> (psi, grad psi)` for an optax loop.

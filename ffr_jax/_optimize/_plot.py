@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from .._case import FlexibleRodCase
+from .._case import Case
 from ._history import History
 
 
-def plot_design(case: FlexibleRodCase, x_phys, ax=None, *, title: str | None = None):
+def plot_design(case: Case, x_phys, ax=None, *, title: str | None = None):
     """Draw the physical densities over the whole rod (interface columns solid), as in the paper.
 
     **Arguments:**

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._typing import Design, Scalar
-from ._filter import DensityFilter
+from .._design.filter import DensityFilter
 from ._projection import HeavisideProjection
 
 

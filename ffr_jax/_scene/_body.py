@@ -2,7 +2,7 @@
 
 import equinox as eqx
 
-from .._body_data import BodyData
+from ._body_data import BodyData
 
 
 class Body(eqx.Module):

@@ -75,3 +75,51 @@ class ConstantSpeedLaw(AbstractLaw):
 
     def __call__(self, t):
         return self.initial + self.speed * t
+
+
+class ConstantLaw(AbstractLaw):
+    """`phi(t) = value` (an array: differentiable)."""
+
+    value: jnp.ndarray
+
+    def __init__(self, value: float):
+        self.value = _scalar(value, "ConstantLaw value")
+
+    def __call__(self, t):
+        return self.value + 0.0 * t
+
+
+class HarmonicLaw(AbstractLaw):
+    """`phi(t) = offset + amplitude sin(2 pi frequency t + phase)` (arrays: differentiable)."""
+
+    amplitude: jnp.ndarray
+    frequency: jnp.ndarray
+    phase: jnp.ndarray
+    offset: jnp.ndarray
+
+    def __init__(self, amplitude: float, frequency: float, phase: float = 0.0, offset: float = 0.0):
+        self.amplitude = _scalar(amplitude, "HarmonicLaw amplitude")
+        self.frequency = _scalar(frequency, "HarmonicLaw frequency")
+        self.phase = _scalar(phase, "HarmonicLaw phase")
+        self.offset = _scalar(offset, "HarmonicLaw offset")
+
+    def __call__(self, t):
+        return self.offset + self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t + self.phase)
+
+
+def _scalar(value, name: str):
+    """A finite float64 scalar array, or a `ValueError` that names the parameter."""
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}.") from None
+    if not np.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value}.")
+    return jnp.asarray(value)
+
+
+def as_law(value) -> AbstractLaw:
+    """A law from an [`AbstractLaw`][] or a number (a [`ConstantLaw`][])."""
+    if isinstance(value, AbstractLaw):
+        return value
+    return ConstantLaw(value)

@@ -3,6 +3,7 @@
 import equinox as eqx
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
+import jax.tree_util as jtu
 
 from .._body_dynamics import (
     body_inertia_and_elastic_forces,
@@ -12,6 +13,7 @@ from .._body_dynamics import (
 )
 from ._base import AbstractConstraint, AbstractForce
 from ._body import Body
+from ._laws import AbstractLaw
 
 
 class Scene(eqx.Module):
@@ -50,6 +52,15 @@ class Scene(eqx.Module):
     @property
     def n_constraints(self) -> int:
         return sum(c.n_equations for c in self.constraints)
+
+    @property
+    def breakpoints(self) -> tuple[float, ...]:
+        """Times where a law of the scene (a driver, a force magnitude) switches pieces, sorted.
+
+        The step-size controller lands on them (`jump_ts`), so that no step straddles a kink.
+        """
+        laws = jtu.tree_leaves(self, is_leaf=lambda node: isinstance(node, AbstractLaw))
+        return tuple(sorted({float(b) for law in laws if isinstance(law, AbstractLaw) for b in law.breakpoints}))
 
     def body_index(self, name: str) -> int:
         for i, b in enumerate(self.bodies):

@@ -21,10 +21,10 @@ class GeometricStiffening(AbstractForce):
 
     `Q_q = -theta'^2 K_geo q`,   `K_geo = Phi^T K_G(sigma_1) Phi`
 
-    (`K_G` the finite element geometric stiffness, see `ffr_jax._geometric_stiffness`). For a
+    (`K_G` the finite element geometric stiffness, see `ffr_jax._design.geometric_stiffness`). For a
     slender rotating beam this reproduces Southwell's rule `omega^2 = omega_0^2 + alpha Omega^2`.
     `K_geo` is an array leaf of the scene, computed from the design by
-    [`FlexibleRodCase.scene`][], so design gradients flow through it.
+    [`Case.scene`][], so design gradients flow through it.
 
     **Limits** (all first order in the pre-stress, as in the classical approach):
     - Only the centrifugal load of the frame's own rotation `theta'` is included. The pre-stress

@@ -12,21 +12,22 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import FlexibleRodCase
-from .._scene._scene import Scene
-from .._simulate import simulate
+from .._problem import Problem
+from .._simulate import solve_minimal
 from .._small_linalg import lu_factor, lu_solve, matmul, spd_solve
-from ._base import AbstractSensitivity
+from ._base import AbstractSensitivity, problem_gradient
 
 
 class AdjointTerms(eqx.Module):
     """The matrices of paper eqs. 25, 30, 33 at one time, plus what the adjoint ODE needs.
 
-    `R1` `(f,)`, `S1`, `S2`, `T1`, `T2` `(f, f)`, `Mbar`, `Mbar_dot` `(f, f)`; the design terms
-    `R2`, `S3`, `T3` are never formed (see [`adjoint_products`][]).
+    `R1` `(f,)`, `Rz` `(f,)` (the velocity counterpart of `R1`, zero for integrands of positions
+    only), `S1`, `S2`, `T1`, `T2` `(f, f)`, `Mbar`, `Mbar_dot` `(f, f)`; the design terms `R2`,
+    `S3`, `T3` are never formed (see [`adjoint_products`][]).
     """
 
     r1: jnp.ndarray
+    rz: jnp.ndarray
     s1: jnp.ndarray
     s2: jnp.ndarray
     t1: jnp.ndarray
@@ -35,53 +36,61 @@ class AdjointTerms(eqx.Module):
     mbar_dot: jnp.ndarray
 
 
-def _redundant_functions(case: FlexibleRodCase, t, zdot):
-    """The paper's functions of `(y_r, z_r, p)` at fixed `t` and `zdot`: `c`, `cdot`, `v`, `ODE`, `F`."""
-    model = case.model
+def _redundant_functions(problem: Problem, t, zdot):
+    """The paper's functions of `(y_r, z_r, p)` at fixed `t` and `zdot`: `c`, `cdot`, `v`, `ODE`, `F`.
 
-    def c(y_r, scene):
-        return scene.constraint_residual(t, y_r)
+    The parameters `p` are the pair `(scene, objective)`: the objective's own arrays (weights,
+    target paths) are parameters like the scene's.
+    """
+    model = problem.model
 
-    def cdot(y_r, z_r, scene):
-        return model.velocity_constraint(t, y_r, z_r, scene)
+    def c(y_r, params):
+        return params[0].constraint_residual(t, y_r)
+
+    def cdot(y_r, z_r, params):
+        return model.velocity_constraint(t, y_r, z_r, params[0])
 
     def v(y_r, z_r):
         return model.split(z_r)[0]
 
-    def ode(y_r, z_r, scene):
-        mbar, rhs = model.minimal_terms(t, y_r, z_r, scene)
+    def ode(y_r, z_r, params):
+        mbar, rhs = model.minimal_terms(t, y_r, z_r, params[0])
         return matmul(mbar, zdot) - rhs, mbar
 
-    def f(y_r, scene):
-        return case.integrand(t, y_r, scene)
+    def f(y_r, z_r, params):
+        integrand = params[1].integrand
+        if integrand is None:
+            return jnp.zeros((), y_r.dtype)
+        return integrand(t, y_r, z_r, params[0])
 
     return c, cdot, v, ode, f
 
 
-def adjoint_terms(case: FlexibleRodCase, t, y, z, scene: Scene) -> AdjointTerms:
-    """`R1, S1, S2, T1, T2, Mbar, dMbar/dt` at `(t, y, z)` as matrices (paper eqs. 25, 30, 33).
+def adjoint_terms(problem: Problem, t, y, z, params) -> AdjointTerms:
+    """`R1, Rz, S1, S2, T1, T2, Mbar, dMbar/dt` at `(t, y, z)` as matrices (paper eqs. 25, 30, 33).
 
     All partial derivatives with respect to the redundant coordinates come from `jax.jacfwd`;
     the variations of the dependent coordinates are eliminated with the position and velocity
     constraints exactly as in the paper (eqs. 23, 28):
     `dy_d/dy = -c_yd^-1 c_y`, `dz_d/dy = -cdot_zd^-1 (cdot_y + cdot_yd dy_d/dy)`,
-    `dz_d/dz = -cdot_zd^-1 cdot_z`.
+    `dz_d/dz = -cdot_zd^-1 cdot_z`. `Rz = F_z + F_zd dz_d/dz` is the velocity term of an integrand
+    that depends on velocities (zero in the paper, whose integrands see positions only).
 
     The adjoint solve uses the products of these matrices with `(mu, nu)` instead
     ([`adjoint_products`][], the same numbers without forming the matrices); this form states the
     paper's terms one by one and checks the products in the tests.
     """
-    model = case.model
+    model = problem.model
     ind = np.asarray(model.partition.independent, int)
     dep = np.asarray(model.partition.dependent, int)
-    y_r, z_r, zdot = model.state_and_accelerations(t, y, z, scene)
-    c, cdot, v, ode, f = _redundant_functions(case, t, zdot)
+    y_r, z_r, zdot = model.state_and_accelerations(t, y, z, params[0])
+    c, cdot, v, ode, f = _redundant_functions(problem, t, zdot)
 
-    c_y = jax.jacfwd(c)(y_r, scene)
-    cd_y, cd_z = jax.jacfwd(cdot, argnums=(0, 1))(y_r, z_r, scene)
+    c_y = jax.jacfwd(c)(y_r, params)
+    cd_y, cd_z = jax.jacfwd(cdot, argnums=(0, 1))(y_r, z_r, params)
     v_y, v_z = jax.jacfwd(v, argnums=(0, 1))(y_r, z_r)
-    o_y, o_z = jax.jacfwd(lambda a, b: ode(a, b, scene)[0], argnums=(0, 1))(y_r, z_r)
-    f_y = jax.grad(f)(y_r, scene)
+    o_y, o_z = jax.jacfwd(lambda a, b: ode(a, b, params)[0], argnums=(0, 1))(y_r, z_r)
+    f_y, f_z = jax.grad(f, argnums=(0, 1))(y_r, z_r, params)
 
     if dep.size:
         lu_c = lu_factor(c_y[:, dep])
@@ -93,55 +102,48 @@ def adjoint_terms(case: FlexibleRodCase, t, y, z, scene: Scene) -> AdjointTerms:
         s2 = -(v_z[:, ind] + matmul(v_z[:, dep], dzd_dz))
         t1 = o_y[:, ind] + matmul(o_y[:, dep], dyd_dy) + matmul(o_z[:, dep], dzd_dy)
         t2 = o_z[:, ind] + matmul(o_z[:, dep], dzd_dz)
-        r1 = f_y[ind] + matmul(dyd_dy.T, f_y[dep])
+        r1 = f_y[ind] + matmul(dyd_dy.T, f_y[dep]) + matmul(dzd_dy.T, f_z[dep])
+        rz = f_z[ind] + matmul(dzd_dz.T, f_z[dep])
     else:
         s1, s2 = -v_y[:, ind], -v_z[:, ind]
         t1, t2 = o_y[:, ind], o_z[:, ind]
-        r1 = f_y[ind]
+        r1, rz = f_y[ind], f_z[ind]
 
     def mbar_fn(tt, yy):
-        return model.minimal_terms(tt, yy, z_r, scene)[0]
+        return model.minimal_terms(tt, yy, z_r, params[0])[0]
 
     mbar, mbar_dot = jax.jvp(mbar_fn, (t, y_r), (jnp.ones_like(t), z_r))
-    return AdjointTerms(r1=r1, s1=s1, s2=s2, t1=t1, t2=t2, mbar=mbar, mbar_dot=mbar_dot)
+    return AdjointTerms(r1=r1, rz=rz, s1=s1, s2=s2, t1=t1, t2=t2, mbar=mbar, mbar_dot=mbar_dot)
 
 
-def adjoint_products(case: FlexibleRodCase, t, y, z, scene: Scene, mu, w, *, design: bool = False):
-    """The terms of paper eqs. 43–44 at `(t, y, z)` as products with the adjoint variables, by reverse mode.
+def constrained_gradient(problem: Problem, t, y_r, z_r, params, phi, *, design: bool):
+    """The gradient of a scalar `Phi(y_r, z_r, p)` along the constraint manifold, by reverse mode.
 
-    The adjoint variables are `mu` and `w = Mbar nu`; `nu = Mbar^-1 w`. With
-    `Phi(y_r, z_r, p) = nu^T ODE - mu^T v - F` (`ODE = Mbar zdot - (fbar - gammabar)` at the forward
-    acceleration `zdot`) and the dependent variations eliminated by the constraints (paper eqs. 23,
-    28) through the multipliers `b = cdot_zd^-T Phi_zd` and `e = c_yd^-T (Phi_yd - cdot_yd^T b)`,
+    With the dependent variations eliminated by the position and velocity constraints (paper eqs.
+    23, 28) through the multipliers `b = cdot_zd^-T Phi_zd` and `e = c_yd^-T (Phi_yd - cdot_yd^T b)`,
     i.e. for `Lambda = Phi - b^T cdot - e^T c`, whose partial derivatives with respect to `y_d`
-    and `z_d` vanish:
+    and `z_d` vanish, the total derivatives of `Phi` with respect to the independent positions and
+    velocities and to the parameters are `Lambda_y`, `Lambda_z` and `Lambda_p`. One `jax.grad` of
+    `Phi` and the cheap VJPs of `cdot` and `c` give all three.
 
-    - `S1^T mu + T1^T nu - R1^T = Lambda_y` (the right-hand side of the `mu` equation of eq. 43),
-    - `S2^T mu + T2^T nu = Lambda_z` (that of the `nu` equation: `(Mbar nu)' = Lambda_z`),
-    - `R2 - mu^T S3 - nu^T T3 = -Lambda_p` (the integrand of eq. 44, only with `design=True`).
-
-    One `jax.vjp` of `Phi` (with respect to `(y_r, z_r)`, and `p` for the design term) and the
-    cheap ones of `cdot` and `c` give all of them: no matrix `S_i`, `T_i` is formed, and the design
-    term costs one reverse pass whatever the number of parameters.
-
-    **Returns:** `(Lambda_y (f,), Lambda_z (f,), nu (f,), Lambda_p)` with `Lambda_p` a pytree like
-    the float leaves of `scene` (`None` unless `design`).
+    **Returns:** `(Lambda_y (f,), Lambda_z (f,), Lambda_p)` with `Lambda_p` a pytree like the float
+    leaves of `params` (`None` unless `design`).
     """
-    model = case.model
-    y_r, z_r, zdot = model.state_and_accelerations(t, y, z, scene)
-    nu = spd_solve(model.minimal_terms(t, y_r, z_r, scene)[0], w)
-    c, cdot, v, ode, f = _redundant_functions(case, t, zdot)
-    dyn, static = eqx.partition(scene, eqx.is_inexact_array)
+    model = problem.model
+    c, cdot, _, _, _ = _redundant_functions(problem, t, None)
+    dyn, static = eqx.partition(params, eqx.is_inexact_array)
 
-    def phi(y_r, z_r, dyn_):
-        s = eqx.combine(dyn_, static)
-        return jnp.sum(nu * ode(y_r, z_r, s)[0]) - jnp.sum(mu * v(y_r, z_r)) - f(y_r, s)
+    def phi_dyn(a, b, d):
+        return phi(a, b, eqx.combine(d, static))
 
-    phi_y, phi_z, lam_p = jax.grad(phi, argnums=(0, 1, 2))(y_r, z_r, dyn)
+    if design:
+        phi_y, phi_z, lam_p = jax.grad(phi_dyn, argnums=(0, 1, 2))(y_r, z_r, dyn)
+    else:
+        (phi_y, phi_z), lam_p = jax.grad(phi_dyn, argnums=(0, 1))(y_r, z_r, dyn), None
 
     lam_y, lam_z = model.split(phi_y)[0], model.split(phi_z)[0]
     if model.partition.dependent:
-        c_i, _, lu = model._velocity_level(t, y_r, scene)  # C_i and the factors of C_d = cdot_zd = c_yd
+        c_i, _, lu = model._velocity_level(t, y_r, params[0])  # C_i and the factors of C_d = cdot_zd = c_yd
         b = lu_solve(lu, model.split(phi_z)[1], trans=1)
         _, cdot_pull = jax.vjp(lambda a, d: cdot(a, z_r, eqx.combine(d, static)), y_r, dyn)
         cdot_y_b, cdot_p_b = cdot_pull(b)
@@ -153,7 +155,59 @@ def adjoint_products(case: FlexibleRodCase, t, y, z, scene: Scene, mu, w, *, des
             _, c_pull = jax.vjp(lambda d: c(y_r, eqx.combine(d, static)), dyn)
             (c_p_e,) = c_pull(e)
             lam_p = jax.tree_util.tree_map(lambda a, g, h: a - g - h, lam_p, cdot_p_b, c_p_e)
-    return lam_y, lam_z, nu, lam_p if design else None
+    return lam_y, lam_z, lam_p
+
+
+def adjoint_products(problem: Problem, t, y, z, params, mu, w, *, design: bool = False):
+    """The terms of paper eqs. 43–44 at `(t, y, z)` as products with the adjoint variables, by reverse mode.
+
+    The adjoint variables are `mu` and `w = Mbar nu`; `nu = Mbar^-1 w`. With
+    `Phi(y_r, z_r, p) = nu^T ODE - mu^T v - F` (`ODE = Mbar zdot - (fbar - gammabar)` at the forward
+    acceleration `zdot`) and its gradient along the constraints `Lambda` ([`constrained_gradient`][]):
+
+    - `S1^T mu + T1^T nu - R1^T = Lambda_y` (the right-hand side of the `mu` equation of eq. 43),
+    - `S2^T mu + T2^T nu - Rz^T = Lambda_z` (that of the `nu` equation: `(Mbar nu)' = Lambda_z`;
+      `Rz`, the derivative of `F` with respect to the independent velocities, extends the paper's
+      eq. 43 to integrands of velocities),
+    - `R2 - mu^T S3 - nu^T T3 = -Lambda_p` (the integrand of eq. 44, only with `design=True`).
+
+    No matrix `S_i`, `T_i` is formed, and the design term costs one reverse pass whatever the
+    number of parameters.
+
+    **Returns:** `(Lambda_y (f,), Lambda_z (f,), nu (f,), Lambda_p)` with `Lambda_p` a pytree like
+    the float leaves of `params` (`None` unless `design`).
+    """
+    model = problem.model
+    scene = params[0]
+    y_r, z_r, zdot = model.state_and_accelerations(t, y, z, scene)
+    nu = spd_solve(model.minimal_terms(t, y_r, z_r, scene)[0], w)
+    _, _, v, ode, f = _redundant_functions(problem, t, zdot)
+
+    def phi(y_r, z_r, p):
+        return jnp.sum(nu * ode(y_r, z_r, p)[0]) - jnp.sum(mu * v(y_r, z_r)) - f(y_r, z_r, p)
+
+    lam_y, lam_z, lam_p = constrained_gradient(problem, t, y_r, z_r, params, phi, design=design)
+    return lam_y, lam_z, nu, lam_p
+
+
+def terminal_products(problem: Problem, t, y, z, params):
+    """End conditions of the adjoint ODE and the terminal term's share of the gradient.
+
+    For `psi = G(t1, y_r, z_r, p) + int F dt`, the boundary terms of paper eq. 42 at `t1` become
+    `(dG/dy - mu^T) dy(t1) + (dG/dz - nu^T Mbar) dz(t1)`, so the adjoint variables end at
+    `mu(t1) = dG/dy^T` and `w(t1) = Mbar nu(t1) = dG/dz^T` (both zero without a terminal term, as
+    in eq. 43), and the gradient gains `dG/dp`; all three are total derivatives along the
+    constraints (the dependent coordinates eliminated as in eqs. 23, 28: [`constrained_gradient`][]
+    with `Phi = G`).
+
+    **Returns:** `(mu(t1) (f,), w(t1) (f,), dG/dp)`.
+    """
+    y_r, z_r = problem.model.state(t, y, z, params[0])
+
+    def phi(y_r, z_r, p):
+        return p[1].terminal(t, y_r, z_r, p[0])
+
+    return constrained_gradient(problem, t, y_r, z_r, params, phi, design=True)
 
 
 def gauss_legendre(order: int):
@@ -162,7 +216,7 @@ def gauss_legendre(order: int):
     return 0.5 * (nodes + 1.0), 0.5 * weights
 
 
-def _quadrature_on_steps(case, scene, forward, backward: diffrax.DenseInterpolation, order: int, chunk: int):
+def _quadrature_on_steps(problem, params, forward, backward: diffrax.DenseInterpolation, order: int, chunk: int):
     """`int_{t0}^{t1} (R2 - mu^T S3 - nu^T T3) dt` (paper eq. 44) as a flat `(n_p,)` vector.
 
     Gauss–Legendre with `order` nodes on every accepted backward step, `(mu, Mbar nu)` from the
@@ -176,7 +230,7 @@ def _quadrature_on_steps(case, scene, forward, backward: diffrax.DenseInterpolat
 
     def integrand(t, mu, w):
         y, z = forward.evaluate(t)[:2]
-        lam_p = adjoint_products(case, t, y, z, scene, mu, w, design=True)[3]
+        lam_p = adjoint_products(problem, t, y, z, params, mu, w, design=True)[3]
         return -jax.flatten_util.ravel_pytree(lam_p)[0]
 
     def local(tau0, tau1, info, tau):
@@ -191,7 +245,7 @@ def _quadrature_on_steps(case, scene, forward, backward: diffrax.DenseInterpolat
         width = jnp.where(steps < n_steps, tau1 - tau0, 0.0)
         tau = (tau0[:, None] + (tau1 - tau0)[:, None] * unit_nodes[None, :]).reshape(-1)
         repeat = lambda a: jnp.repeat(a, order, axis=0)
-        mu, w = jax.vmap(local)(repeat(tau0), repeat(tau1), jax.tree_util.tree_map(repeat, info), tau)
+        mu, w = jax.vmap(local)(repeat(tau0), repeat(tau1), jax.tree_util.tree_map(repeat, info), tau)[:2]
         g = jax.vmap(integrand)(direction * tau, mu, w)
         weights = (width[:, None] * unit_weights[None, :]).reshape(-1)
         return jnp.sum(weights[:, None] * g, axis=0)
@@ -200,7 +254,7 @@ def _quadrature_on_steps(case, scene, forward, backward: diffrax.DenseInterpolat
         k, total = carry
         return k + 1, total + chunk_sum(k)
 
-    n_p = jax.flatten_util.ravel_pytree(eqx.filter(scene, eqx.is_inexact_array))[0].size
+    n_p = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[0].size
     _, total = jax.lax.while_loop(lambda carry: carry[0] * chunk < n_steps, body,
                                   (jnp.zeros((), n_steps.dtype), jnp.zeros(n_p)))
     return total
@@ -210,16 +264,23 @@ class Adjoint(AbstractSensitivity):
     """The adjoint variable method of the paper (Sect. 3.2), backward in diffrax.
 
     Forward: the minimal equations of motion with dense output. Backward, from `t1` to `t0`
-    (paper eq. 43, final values `mu(t1) = 0`, `Mbar(t1) nu(t1) = 0`):
+    (paper eq. 43, extended to objectives of velocities and to a terminal term):
 
-    `mu' = S1^T mu + T1^T nu - R1^T`,  `Mbar nu' = S2^T mu - Mbar' nu + T2^T nu`,
+    `mu' = S1^T mu + T1^T nu - R1^T`,  `Mbar nu' = S2^T mu - Mbar' nu + T2^T nu - Rz^T`,
 
     solved for `(mu, w)` with `w = Mbar nu`, for which the second equation reads
-    `w' = S2^T mu + T2^T nu` (no derivative of `Mbar` needed), and with the products formed by
-    reverse mode ([`adjoint_products`][]). The gradient (paper eq. 44)
-    `grad psi = G(t0) = int_{t0}^{t1} (R2 - mu^T S3 - nu^T T3) dt` lives in the parameter space `p`
-    (the body data and scene parameters, a few hundred numbers), so that the cost does not grow
-    with the number of design variables; one VJP of `p(x)` then gives the design gradient.
+    `w' = S2^T mu + T2^T nu - Rz^T` (no derivative of `Mbar` needed), and with the products formed
+    by reverse mode ([`adjoint_products`][]). `Rz` is the derivative of the integrand `F` with
+    respect to the independent velocities (zero for the paper's integrands of positions). The
+    end values are `mu(t1) = dG/dy`, `w(t1) = dG/dz` for a terminal term `G(t1, y_r, z_r, p)`
+    (zero without one, as in eq. 43; [`terminal_products`][]).
+
+    The gradient (paper eq. 44 plus the terminal term)
+    `grad psi = int_{t0}^{t1} (R2 - mu^T S3 - nu^T T3) dt + dG/dp` lives in the parameter space
+    `p` (the body data and scene parameters, a few hundred numbers), so that the cost does not
+    grow with the number of design variables; one VJP of `p(x)` then gives the design gradient.
+    The initial state is a parameter too: integrating the terms `mu^T dy` and `nu^T Mbar dz` of
+    eqs. 36 and 40 by parts leaves `dpsi/dy0 = mu(t0)` and `dpsi/dz0 = w(t0)`.
 
     By default the integral is not part of the backward ODE (whose error control would then be
     driven by the few hundred entries of `G`): it is evaluated after the backward solve by a
@@ -237,9 +298,9 @@ class Adjoint(AbstractSensitivity):
       degree 5 on each step), or `None`.
     - `chunk`: backward steps per vectorised quadrature batch.
     - `products`: how the right-hand side of eq. 43 is formed: `"reverse"` (default: one reverse
-      pass, [`adjoint_products`][]) or `"matrices"` (the paper's matrices `R1, S1, S2, T1, T2` from
-      `jax.jacfwd`, [`adjoint_terms`][], multiplied out; the same numbers, about 6x the cost per
-      evaluation on the reference case). The design term is one VJP in both.
+      pass, [`adjoint_products`][]) or `"matrices"` (the paper's matrices `R1, Rz, S1, S2, T1, T2`
+      from `jax.jacfwd`, [`adjoint_terms`][], multiplied out; the same numbers, about 6x the cost
+      per evaluation on the reference case). The design term is one VJP in both.
     - `max_steps`: step budget of the backward solve, whose dense output holds that many steps
       (default: the forward budget).
 
@@ -268,58 +329,75 @@ class Adjoint(AbstractSensitivity):
         if self.products not in ("reverse", "matrices"):
             raise ValueError(f"Adjoint(products=...) must be 'reverse' or 'matrices', got {self.products!r}.")
 
-    def backward_solve(self, case: FlexibleRodCase, scene: Scene, forward, *, solver=None, max_steps: int):
+    def backward_solve(self, problem: Problem, forward, *, solver=None, max_steps: int):
         """The backward solve of paper eq. 43 on the forward trajectory `forward` (dense).
 
         `solver` is the forward solver (used backward unless `self.solver` is set).
 
-        **Returns:** the diffrax solution of `(mu, w)` (dense output; `quadrature` set) or of
-        `(mu, w, G)` (`quadrature=None`; `G(t0)` the flat gradient).
+        **Returns:** `(solution, dG/dp)`: the diffrax solution of `(mu, w)` (dense output and the
+        value at `t0`; `quadrature` set) or of `(mu, w, G)` (`quadrature=None`; `G(t0)` the flat
+        gradient), and the terminal term's share of the gradient (`None` without a terminal term).
         """
         dense = forward.solution
         in_ode = self.quadrature is None
-        f = case.model.partition.n_independent
+        params = (problem.scene, problem.objective)
+        f = problem.model.partition.n_independent
 
         def field(t, state, args):
             y, z = dense.evaluate(t)[:2]
             if self.products == "matrices":
                 mu, w = state[0], state[1]
-                terms = adjoint_terms(case, t, y, z, scene)
+                terms = adjoint_terms(problem, t, y, z, params)
                 nu = spd_solve(terms.mbar, w)
                 lam_y = matmul(terms.s1.T, mu) + matmul(terms.t1.T, nu) - terms.r1
-                lam_z = matmul(terms.s2.T, mu) + matmul(terms.t2.T, nu)
-                lam_p = adjoint_products(case, t, y, z, scene, mu, w, design=True)[3] if in_ode else None
+                lam_z = matmul(terms.s2.T, mu) + matmul(terms.t2.T, nu) - terms.rz
+                lam_p = adjoint_products(problem, t, y, z, params, mu, w, design=True)[3] if in_ode else None
             else:
-                lam_y, lam_z, _, lam_p = adjoint_products(case, t, y, z, scene, state[0], state[1], design=in_ode)
+                lam_y, lam_z, _, lam_p = adjoint_products(problem, t, y, z, params, state[0], state[1], design=in_ode)
             if in_ode:
                 return lam_y, lam_z, jax.flatten_util.ravel_pytree(lam_p)[0]
             return lam_y, lam_z
 
-        state1 = (jnp.zeros(f), jnp.zeros(f))
+        t1 = jnp.asarray(problem.t1, forward.ys.dtype)
+        if problem.objective.terminal is None:
+            state1, terminal = (jnp.zeros(f), jnp.zeros(f)), None
+        else:
+            mu1, w1, terminal = terminal_products(problem, t1, forward.ys[-1], forward.zs[-1], params)
+            state1 = (mu1, w1)
         if in_ode:
-            n_p = jax.flatten_util.ravel_pytree(eqx.filter(scene, eqx.is_inexact_array))[0].size
+            n_p = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[0].size
             state1 = (*state1, jnp.zeros(n_p))
         if self.solver is not None:
             solver = self.solver
         elif solver is None:
             solver = diffrax.Dopri8()
-        jumps = tuple(j for j in case.jump_ts if case.t0 < j < case.t1)
+        jumps = problem.jump_ts
         controller = diffrax.PIDController(rtol=self.rtol, atol=self.atol, jump_ts=jnp.asarray(jumps) if jumps else None)
-        return diffrax.diffeqsolve(
-            diffrax.ODETerm(field), solver, case.t1, case.t0, None, state1,
-            stepsize_controller=controller, saveat=diffrax.SaveAt(t1=in_ode, dense=not in_ode),
+        solution = diffrax.diffeqsolve(
+            diffrax.ODETerm(field), solver, problem.t1, problem.t0, None if problem.dt0 is None else -problem.dt0, state1,
+            stepsize_controller=controller, saveat=diffrax.SaveAt(t1=True, dense=not in_ode),
             max_steps=max_steps, adjoint=diffrax.RecursiveCheckpointAdjoint(),
         )
+        return solution, terminal
 
-    def value_and_grad_scene(self, case, scene, *, rtol, atol, solver, max_steps):
-        forward = simulate(
-            case.model, scene, case.t0, case.t1, case.y_r0, case.z_r0, integrand=case.integrand,
-            solver=solver, rtol=rtol, atol=atol, dense=True, max_steps=max_steps, jump_ts=case.jump_ts,
+    def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
+        obj = problem.objective
+        forward = solve_minimal(
+            problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
+            integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol, dense=True,
+            max_steps=max_steps, jump_ts=problem.jump_ts, dt0=problem.dt0,
         )
-        unravel = jax.flatten_util.ravel_pytree(eqx.filter(scene, eqx.is_inexact_array))[1]
+        params = (problem.scene, problem.objective)
+        unravel = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[1]
         backward_steps = max_steps if self.max_steps is None else self.max_steps
-        backward = self.backward_solve(case, scene, forward, solver=solver, max_steps=backward_steps)
+        backward, terminal = self.backward_solve(problem, forward, solver=solver, max_steps=backward_steps)
         if self.quadrature is None:
-            return forward.psi, unravel(backward.ys[2][-1])
-        grad = _quadrature_on_steps(case, scene, forward.solution, backward.interpolation, self.quadrature, self.chunk)
-        return forward.psi, unravel(grad)
+            grad = backward.ys[2][-1]
+        else:
+            grad = _quadrature_on_steps(problem, params, forward.solution, backward.interpolation, self.quadrature,
+                                        self.chunk)
+        if terminal is not None:
+            grad = grad + jax.flatten_util.ravel_pytree(terminal)[0]
+        g_scene, g_objective = unravel(grad)
+        mu0, w0 = backward.ys[0][-1], backward.ys[1][-1]
+        return forward.psi, problem_gradient(problem, (g_scene, g_objective, mu0, w0))

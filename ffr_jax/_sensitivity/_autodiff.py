@@ -3,15 +3,7 @@
 import diffrax
 import equinox as eqx
 
-from .._simulate import simulate
-from ._base import AbstractSensitivity
-
-
-def _psi(case, scene, rtol, atol, solver, max_steps, adjoint):
-    return simulate(
-        case.model, scene, case.t0, case.t1, case.y_r0, case.z_r0, integrand=case.integrand,
-        solver=solver, rtol=rtol, atol=atol, max_steps=max_steps, adjoint=adjoint, jump_ts=case.jump_ts,
-    ).psi
+from ._base import AbstractSensitivity, parameters, problem_gradient, psi_of, with_parameters
 
 
 class Autodiff(AbstractSensitivity):
@@ -23,8 +15,10 @@ class Autodiff(AbstractSensitivity):
 
     checkpoints: int | None = None
 
-    def value_and_grad_scene(self, case, scene, *, rtol, atol, solver, max_steps):
+    def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
         adjoint = diffrax.RecursiveCheckpointAdjoint(checkpoints=self.checkpoints)
-        return eqx.filter_value_and_grad(
-            lambda s: _psi(case, s, rtol, atol, solver, max_steps, adjoint)
-        )(scene)
+        psi, grads = eqx.filter_value_and_grad(
+            lambda params: psi_of(with_parameters(problem, params), rtol=rtol, atol=atol, solver=solver,
+                                  max_steps=max_steps, adjoint=adjoint)
+        )(parameters(problem))
+        return psi, problem_gradient(problem, grads)

@@ -3,8 +3,7 @@
 import diffrax
 import equinox as eqx
 
-from ._autodiff import _psi
-from ._base import AbstractSensitivity
+from ._base import AbstractSensitivity, parameters, problem_gradient, psi_of, with_parameters
 
 
 class Backsolve(AbstractSensitivity):
@@ -20,9 +19,11 @@ class Backsolve(AbstractSensitivity):
     rtol: float = 1e-8
     atol: float = 1e-10
 
-    def value_and_grad_scene(self, case, scene, *, rtol, atol, solver, max_steps):
+    def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
         controller = diffrax.PIDController(rtol=self.rtol, atol=self.atol)
         adjoint = diffrax.BacksolveAdjoint(stepsize_controller=controller)
-        return eqx.filter_value_and_grad(
-            lambda s: _psi(case, s, rtol, atol, solver, max_steps, adjoint)
-        )(scene)
+        psi, grads = eqx.filter_value_and_grad(
+            lambda params: psi_of(with_parameters(problem, params), rtol=rtol, atol=atol, solver=solver,
+                                  max_steps=max_steps, adjoint=adjoint)
+        )(parameters(problem))
+        return psi, problem_gradient(problem, grads)

@@ -1,10 +1,11 @@
 """Central finite differences in the design variables."""
 
+import diffrax
 import jax
+import jax.flatten_util
 import jax.numpy as jnp
 
-from .._simulate import simulate
-from ._base import AbstractSensitivity
+from ._base import AbstractSensitivity, psi_of
 
 
 class FiniteDifferences(AbstractSensitivity):
@@ -14,7 +15,9 @@ class FiniteDifferences(AbstractSensitivity):
     - `step`: the perturbation `h` (the paper used 0.1; a converged one is ~1e-4…1e-6, with the
       forward tolerance far below `h^2`). `x +- h` must stay inside `[x_min, 1]`.
     - `entries`: optional indices of the design variables to difference (default: all); other
-      entries of the returned gradient are NaN so that they cannot be mistaken for values.
+      entries of the returned gradient are NaN so that they cannot be mistaken for values. For a
+      dict design the indices count in the flattened design (`jax.flatten_util.ravel_pytree`:
+      bodies in sorted name order).
     - `batch_size`: how many perturbed designs are simulated at once (`jax.lax.map` over
       `jax.vmap` batches).
     """
@@ -23,16 +26,17 @@ class FiniteDifferences(AbstractSensitivity):
     entries: tuple[int, ...] | None = None
     batch_size: int = 8
 
-    def value_and_grad_scene(self, case, scene, *, rtol, atol, solver, max_steps):
-        raise ValueError("Finite differences act on the design, not on the scene parameters: use "
-                         "value_and_grad(case, x, 'fd'), or another method (e.g. 'adjoint') for scene gradients.")
+    def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
+        raise ValueError("Finite differences act on the design, not on the problem's parameters: use "
+                         "value_and_grad(case, x, 'fd'), or another method (e.g. 'adjoint') for problem gradients.")
 
     def value_and_grad_design(self, case, x, *, rtol, atol, solver, max_steps):
+        adjoint = diffrax.RecursiveCheckpointAdjoint()
+        x, unravel = jax.flatten_util.ravel_pytree(x)
+
         def psi(xx):
-            return simulate(
-                case.model, case.scene(xx), case.t0, case.t1, case.y_r0, case.z_r0, integrand=case.integrand,
-                solver=solver, rtol=rtol, atol=atol, max_steps=max_steps, jump_ts=case.jump_ts,
-            ).psi
+            return psi_of(case.problem.with_scene(case.scene(unravel(xx))), rtol=rtol, atol=atol, solver=solver,
+                          max_steps=max_steps, adjoint=adjoint)
 
         idx = jnp.arange(x.size) if self.entries is None else jnp.asarray(self.entries, int)
         n = idx.size
@@ -53,4 +57,4 @@ class FiniteDifferences(AbstractSensitivity):
         values = jax.lax.map(lambda a: perturbed(*a), (entry, shift), batch_size=self.batch_size)
         diffs = (values[1:n + 1] - values[n + 1:2 * n + 1]) / (2 * self.step)
         grad = jnp.full_like(x, jnp.nan).at[idx].set(diffs)
-        return values[0], grad
+        return values[0], unravel(grad)

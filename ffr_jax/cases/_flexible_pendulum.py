@@ -3,17 +3,17 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import FlexibleRodCase
-from .._fe import RodMesh
-from .._model import MinimalModel, choose_partition
+from .._case import Case
+from .._design.design_map import DesignMap
+from .._design.material import SIMP
 from .._objective._compliance import Compliance
+from .._problem import Problem
 from .._scene._body import Body
 from .._scene._damping import ModalDamping
 from .._scene._gravity import Gravity
 from .._scene._ground_revolute import GroundRevolute
 from .._scene._scene import Scene
-from .._simp import SIMP, RodDesign
-from ._slider_crank import rod_template
+from ._rod import rod_body
 
 
 def flexible_pendulum(
@@ -30,7 +30,7 @@ def flexible_pendulum(
     height: float = 0.06,
     thickness: float = 0.01,
     material: SIMP = SIMP(),
-) -> FlexibleRodCase:
+) -> Case:
     """A flexible rod pinned at its point A to the ground, released from rest at `initial_angle`.
 
     The rod is the one of REFERENCE_CASE §1–2 (Q4 mesh, SIMP design, hinged–hinged modes, frame
@@ -48,35 +48,21 @@ def flexible_pendulum(
     - `g`: magnitude of the gravitational acceleration; `length`, `height`, `thickness`: rod.
     - `material`: the SIMP law.
 
-    **Returns:** a [`FlexibleRodCase`][].
+    **Returns:** a [`Case`][].
     """
     if t1 <= 0:
         raise ValueError(f"t1 must be positive, got {t1}.")
-    mesh = RodMesh(nx, ny, length, height, thickness)
-    design = RodDesign(mesh, material)
+    body = rod_body(nx, ny, n_modes, length=length, height=height, thickness=thickness, material=material)
     forces = ()
     if gravity:
         forces += (Gravity((0.0, -float(g))),)
     if damping_ratio is not None:
         forces += (ModalDamping(body=0, ratio=damping_ratio),)
     scene = Scene(
-        bodies=(Body("rod", rod_template(design, n_modes)),),
+        bodies=(Body("rod", body.uniform_body_data()),),
         constraints=(GroundRevolute(body=0, marker=0, point=(0.0, 0.0)),),
         forces=forces,
     )
     y_r0 = jnp.zeros(scene.n_coordinates).at[2].set(float(initial_angle))
-    z_r0 = jnp.zeros(scene.n_coordinates)
-    partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=(0, 1))
-    model = MinimalModel(partition=partition, reference_dependent=y_r0[np.asarray(partition.dependent)])
-    return FlexibleRodCase(
-        design=design,
-        n_modes=n_modes,
-        body=0,
-        scene_template=scene,
-        model=model,
-        integrand=Compliance(body=0),
-        t0=0.0,
-        t1=float(t1),
-        y_r0=y_r0,
-        z_r0=z_r0,
-    )
+    problem = Problem(scene, t1, positions=y_r0, objective=Compliance(body=0))
+    return Case(problem=problem, design_map=DesignMap({"rod": body}))

@@ -3,24 +3,40 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._body_data import rigid_body_data
-from .._case import FlexibleRodCase
-from .._fe import RodMesh
-from .._model import MinimalModel, choose_partition
+from .._scene._body_data import rigid_body_data
+from .._case import Case
+from .._design.design_map import DesignMap
+from .._design.material import SIMP
+from .._model import choose_partition
 from .._objective._compliance import Compliance
+from .._problem import Problem
 from .._scene._angle_driver import AngleDriver
 from .._scene._body import Body
 from .._scene._ground_revolute import GroundRevolute
 from .._scene._laws import RampLaw
 from .._scene._revolute import Revolute
 from .._scene._scene import Scene
-from .._simp import SIMP, RodDesign
-from ._slider_crank import rod_template
+from ._rod import rod_body
 
 
-def _uniform_bar(mass: float, length: float):
+def uniform_bar(mass: float, length: float):
     """Rigid body data of a slender uniform bar from its frame origin (marker 0) to `(length, 0)` (marker 1)."""
     return rigid_body_data(mass, (0.5 * mass * length, 0.0), mass * length**2 / 3.0, [[0.0, 0.0], [length, 0.0]])
+
+
+def check_grashof(crank: float, coupler: float, rocker: float, ground: float) -> None:
+    """Raise a `ValueError` unless the link lengths make a Grashof crank–rocker (the crank turns fully)."""
+    links = {"crank": crank, "coupler": coupler, "rocker": rocker, "ground": ground}
+    if min(links.values()) <= 0:
+        raise ValueError(f"All link lengths must be positive, got {links}.")
+    shortest, longest = min(links.values()), max(links.values())
+    if crank != shortest or shortest + longest > sum(links.values()) - shortest - longest:
+        raise ValueError(
+            f"The link lengths {links} do not make a Grashof crank–rocker (the crank must be the "
+            "shortest link and shortest + longest <= sum of the other two): the crank cannot turn "
+            "fully and the linkage would fail to assemble during the run. Shorten the crank or "
+            "change the other links."
+        )
 
 
 def rigid_four_bar_position(phi, chord, crank, rocker, pivot):
@@ -78,7 +94,7 @@ def four_bar(
     height: float = 0.06,
     thickness: float = 0.01,
     material: SIMP = SIMP(),
-) -> FlexibleRodCase:
+) -> Case:
     """A crank–rocker four-bar: rigid crank, flexible coupler (the design rod), rigid rocker.
 
     Bodies (in this order): the crank, a uniform bar of length `crank` pivoting about the inertial
@@ -100,29 +116,18 @@ def four_bar(
     - `speed`, `t_ramp`: crank run-up; `crank_mass`, `rocker_mass`: rigid link masses.
     - `length`, `height`, `thickness`, `material`: the coupler rod.
 
-    **Returns:** a [`FlexibleRodCase`][] with `body = 1` (the coupler).
+    **Returns:** a [`Case`][] whose design map designs the body `"coupler"` (scene body 1).
     """
-    links = {"crank": crank, "coupler": length, "rocker": rocker, "ground": ground}
-    if min(links.values()) <= 0:
-        raise ValueError(f"All link lengths must be positive, got {links}.")
-    shortest, longest = min(links.values()), max(links.values())
-    if crank != shortest or shortest + longest > sum(links.values()) - shortest - longest:
-        raise ValueError(
-            f"The link lengths {links} do not make a Grashof crank–rocker (the crank must be the "
-            "shortest link and shortest + longest <= sum of the other two): the crank cannot turn "
-            "fully and the linkage would fail to assemble during the run. Shorten the crank or "
-            "change the other links."
-        )
+    check_grashof(crank, length, rocker, ground)
     if t1 <= 0:
         raise ValueError(f"t1 must be positive, got {t1}.")
-    mesh = RodMesh(nx, ny, length, height, thickness)
-    design = RodDesign(mesh, material)
+    body = rod_body(nx, ny, n_modes, length=length, height=height, thickness=thickness, material=material)
     law = RampLaw(t_ramp=t_ramp, angle_at_ramp=speed * t_ramp / 2, speed=speed)
     scene = Scene(
         bodies=(
-            Body("crank", _uniform_bar(crank_mass, crank)),
-            Body("coupler", rod_template(design, n_modes)),
-            Body("rocker", _uniform_bar(rocker_mass, rocker)),
+            Body("crank", uniform_bar(crank_mass, crank)),
+            Body("coupler", body.uniform_body_data()),
+            Body("rocker", uniform_bar(rocker_mass, rocker)),
         ),
         constraints=(
             GroundRevolute(body=0, marker=0, point=(0.0, 0.0)),
@@ -137,21 +142,9 @@ def four_bar(
     y_r0 = jnp.zeros(n_r)
     rigid = tuple(range(3)) + (3, 4, 5) + tuple(range(n_r - 3, n_r))
     y_r0 = y_r0.at[np.asarray(rigid)].set(guess(0.0, jnp.zeros(n_modes), scene))
-    z_r0 = jnp.zeros(n_r)
     partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=rigid)
     if partition.dependent != rigid:
         raise ValueError(f"The four-bar's rigid coordinates {rigid} are not a regular dependent set at phi = 0.")
-    model = MinimalModel(partition=partition, reference_dependent=y_r0[np.asarray(rigid)], dependent_guess=guess)
-    return FlexibleRodCase(
-        design=design,
-        n_modes=n_modes,
-        body=1,
-        scene_template=scene,
-        model=model,
-        integrand=Compliance(body=1),
-        t0=0.0,
-        t1=float(t1),
-        y_r0=y_r0,
-        z_r0=z_r0,
-        jump_ts=law.breakpoints,
-    )
+    problem = Problem(scene, t1, positions=y_r0, objective=Compliance(body=1), partition=partition,
+                      dependent_guess=guess)
+    return Case(problem=problem, design_map=DesignMap({"coupler": body}))

@@ -3,9 +3,11 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._body_data import rigid_body_data
-from .._model import MinimalModel, Partition, choose_partition
-from .._rigid_case import RigidCase
+from .._scene._body_data import rigid_body_data
+from .._model import Partition, choose_partition
+from .._objective._base import AbstractIntegrand
+from .._objective._kinetic_energy import KineticEnergy
+from .._problem import Problem
 from .._scene._angle_driver import AngleDriver
 from .._scene._body import Body
 from .._scene._ground_revolute import GroundRevolute
@@ -59,7 +61,8 @@ def rigid_slider_crank(
     t_ramp: float = 0.5,
     initial_speed: float = 10.0,
     partition: Partition | None = None,
-) -> RigidCase:
+    objective: AbstractIntegrand | None = None,
+) -> Problem:
     """A slider–crank of rigid bodies: crank, connecting rod, and a slider of mass `m_s` on the x-axis.
 
     Bodies: the crank, a uniform bar of length `eps` (frame at the pivot, the inertial origin);
@@ -83,8 +86,9 @@ def rigid_slider_crank(
     - `stiffness`, `damping`, `rest_length`, `spring_anchor`: the spring–damper.
     - `partition`: override the coordinate partition (default: the crank angle independent when
       free, nothing independent when driven).
+    - `objective`: the objective (default: the integral of the kinetic energy, `int T dt`).
 
-    **Returns:** a [`RigidCase`][].
+    **Returns:** a [`Problem`][].
     """
     if not 0 < eccentricity < length:
         raise ValueError(
@@ -125,10 +129,6 @@ def rigid_slider_crank(
         partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=(0, 1, 3, 4, 5, 6, 7, 8, 2))
     guess = _driven_guess if driven else _free_guess
     default = partition.dependent == ((0, 1, 2, 3, 4, 5, 6, 7, 8) if driven else (0, 1, 3, 4, 5, 6, 7, 8))
-    model = MinimalModel(
-        partition=partition,
-        reference_dependent=y_r0[np.asarray(partition.dependent, int)],
-        dependent_guess=guess if default else None,
-    )
-    return RigidCase(scene=scene, model=model, t0=0.0, t1=float(t1), y_r0=y_r0, z_r0=z_r0,
-                     jump_ts=law.breakpoints if driven else ())
+    return Problem(scene, t1, positions=y_r0, velocities=z_r0, partition=partition,
+                   objective=KineticEnergy() if objective is None else objective,
+                   dependent_guess=guess if default else None)

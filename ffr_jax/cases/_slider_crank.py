@@ -1,57 +1,42 @@
 """The flexible slider–crank of the paper (Sect. 4), exactly as fixed in REFERENCE_CASE.md."""
 
-import functools
-
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._body_data import flexible_body_data
-from .._case import FlexibleRodCase
-from .._fe import RodMesh, mass_matrix, stiffness_matrix
-from .._model import MinimalModel, choose_partition
-from .._modes import hinged_modes
+from .._case import Case
+from .._design.design_map import DesignMap
+from .._design.designed_body import DesignedBody
+from .._design.material import SIMP
+from .._design.modal.auto import AutoModes
+from .._design.modal.base import AbstractModalSolver
 from .._objective._compliance import Compliance
+from .._problem import Problem
 from .._scene._body import Body
 from .._scene._laws import RampLaw
 from .._scene._point_on_line import PointOnLine
 from .._scene._prescribed_point import CrankPin
 from .._scene._scene import Scene
-from .._simp import SIMP, RodDesign
-from .._sparse_fe import resolve_fe_path, sparse_mass_matrix, sparse_stiffness_matrix
-from .._sparse_modes import sparse_hinged_modes
+from ._rod import rod_body
 
 
-def _rigid_slider_crank_guess(t, y, scene, *, length):
-    """Rigid-body estimate of `(R_x, R_y, theta)`: `R = P(t)`, `sin theta = -P_y / l`."""
+def slider_crank_guess(t, y, scene):
+    """Rigid-body estimate of `(R_x, R_y, theta)`: `R = P(t)`, `sin theta = -P_y / l`.
+
+    The rod length `l` is read from the scene (the undeformed position of B, marker 1), so the
+    estimate holds for every member of the family.
+    """
     del y
     pin = scene.constraints[0].pin(t)
+    length = scene.bodies[0].data.marker_positions[1, 0]
     return jnp.stack([pin[0], pin[1], -jnp.arcsin(pin[1] / length)])
 
 
-def rod_template(design: RodDesign, n_modes: int, value: float = 0.5, fe_path: str = "auto"):
-    """Body data of the rod at a uniform design (used to build scenes and choose partitions).
-
-    `fe_path` (`"auto"`, `"dense"`, `"sparse"`) picks the FE path as for [`FlexibleRodCase`][].
-    Compiled as one function: op-by-op dispatch of the body-data products costs seconds.
-    """
-    return _uniform_rod_data(design, n_modes, value, fe_path)
-
-
-@eqx.filter_jit
-def _uniform_rod_data(design: RodDesign, n_modes: int, value: float, fe_path: str):
-    mesh = design.mesh
-    xe = design.element_densities(design.initial_design(value))
-    youngs, densities = design.material.youngs(xe), design.material.densities(xe)
-    a, b = mesh.node_a, mesh.node_b
-    fixed = (2 * a, 2 * a + 1, 2 * b + 1)
-    if resolve_fe_path(fe_path, mesh) == "sparse":
-        k, m = sparse_stiffness_matrix(mesh, youngs), sparse_mass_matrix(mesh, densities)
-        basis = sparse_hinged_modes(k, m, fixed, n_modes)
-    else:
-        k, m = stiffness_matrix(mesh, youngs), mass_matrix(mesh, densities)
-        basis = hinged_modes(k, m, fixed, n_modes)
-    return flexible_body_data(mesh, m, k, basis.modes, (a, b))
+def _check_eccentricity(eccentricity: float, length: float) -> None:
+    if not 0 < eccentricity < length:
+        raise ValueError(
+            f"The crank eccentricity must lie in (0, l) = (0, {length}) for the slider–crank to assemble "
+            f"at every crank angle, got {eccentricity}."
+        )
 
 
 def slider_crank(
@@ -67,8 +52,9 @@ def slider_crank(
     height: float = 0.06,
     thickness: float = 0.01,
     material: SIMP = SIMP(),
-    fe_path: str = "auto",
-) -> FlexibleRodCase:
+    modal_solver: AbstractModalSolver = AutoModes(),
+    rod: DesignedBody | None = None,
+) -> Case:
     """The flexible slider–crank (REFERENCE_CASE.md, paper Sect. 4) and its family of small variants.
 
     A rigid crank of eccentricity `eps` turns about the inertial origin with the prescribed angle
@@ -82,22 +68,25 @@ def slider_crank(
     - `nx`, `ny`: mesh of the rod (`ny` even, `nx >= 4`); `n_modes`: retained modes; `t1`: end time.
     - `eccentricity`, `speed`, `t_ramp`: crank; `length`, `height`, `thickness`: rod.
     - `material`: the SIMP law (defaults of REFERENCE_CASE §1).
-    - `fe_path`: `"auto"` (default: sparse FE above 1,000 degrees of freedom, i.e. the reference
-      100 x 6 rod and up to 1000 x 100 and beyond), `"dense"` or `"sparse"`; both paths give the
-      same numbers. Forward mode (`jax.jvp`) with respect to `x` needs `"dense"`.
+    - `modal_solver`: [`AutoModes`][] (default: Lanczos above 1,000 degrees of freedom, i.e. the
+      reference 100 x 6 rod and up to 1000 x 100 and beyond), [`DenseModes`][] or
+      [`LanczosModes`][]; all give the same numbers. Forward mode (`jax.jvp`) with respect to `x`
+      needs `DenseModes()`.
+    - `rod`: another designed connecting rod (e.g. the rod read from a mesh file, or any body whose
+      marker 0 is the crank pin A and marker 1 the slider point B, both on the frame's x-axis);
+      default [`rod_body`][]`(nx, ny, n_modes, ...)` with the arguments above.
 
-    **Returns:** a [`FlexibleRodCase`][].
+    **Returns:** a [`Case`][]: the [`Problem`][] with the rod's compliance as objective and a
+    [`DesignMap`][] of the rod (`case.design` is its [`DesignedBody`][], see [`rod_body`][]).
     """
-    if not 0 < eccentricity < length:
-        raise ValueError(
-            f"The crank eccentricity must lie in (0, l) = (0, {length}) for the slider–crank to assemble "
-            f"at every crank angle, got {eccentricity}."
-        )
+    if rod is None:
+        _check_eccentricity(eccentricity, length)
     if t1 <= 0:
         raise ValueError(f"t1 must be positive, got {t1}.")
-    mesh = RodMesh(nx, ny, length, height, thickness)
-    design = RodDesign(mesh, material)
-    rod = Body("rod", rod_template(design, n_modes, fe_path=fe_path))
+    body = rod if rod is not None else rod_body(nx, ny, n_modes, length=length, height=height,
+                                                thickness=thickness, material=material, modal_solver=modal_solver)
+    rod = Body("rod", body.uniform_body_data())
+    _check_eccentricity(eccentricity, float(rod.data.marker_positions[1, 0]))
     law = RampLaw(t_ramp=t_ramp, angle_at_ramp=speed * t_ramp / 2, speed=speed)
     scene = Scene(
         bodies=(rod,),
@@ -107,26 +96,5 @@ def slider_crank(
         ),
     )
     y_r0 = jnp.zeros(scene.n_coordinates).at[0].set(eccentricity)
-    z_r0 = jnp.zeros(scene.n_coordinates)
-    partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=(0, 1, 2))
-    model = MinimalModel(
-        partition=partition,
-        reference_dependent=y_r0[np.asarray(partition.dependent)],
-        dependent_guess=functools.partial(_rigid_slider_crank_guess, length=length)
-        if partition.dependent == (0, 1, 2)
-        else None,
-    )
-    return FlexibleRodCase(
-        design=design,
-        n_modes=n_modes,
-        body=0,
-        scene_template=scene,
-        model=model,
-        integrand=Compliance(body=0),
-        t0=0.0,
-        t1=float(t1),
-        y_r0=y_r0,
-        z_r0=z_r0,
-        jump_ts=law.breakpoints,
-        fe_path=fe_path,
-    )
+    problem = Problem(scene, t1, positions=y_r0, objective=Compliance(body=0), dependent_guess=slider_crank_guess)
+    return Case(problem=problem, design_map=DesignMap({"rod": body}))

@@ -4,18 +4,18 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import FlexibleRodCase
-from .._fe import RodMesh
-from .._model import MinimalModel, choose_partition
+from .._case import Case
+from .._design.design_map import DesignMap
+from .._design.material import SIMP
 from .._objective._compliance import Compliance
+from .._problem import Problem
 from .._scene._angle_driver import AngleDriver
 from .._scene._body import Body
 from .._scene._ground_revolute import GroundRevolute
 from .._scene._laws import ConstantSpeedLaw
 from .._scene._scene import Scene
 from .._scene._stiffening import GeometricStiffening
-from .._simp import SIMP, RodDesign
-from ._slider_crank import rod_template
+from ._rod import rod_body
 
 
 def spinning_beam(
@@ -31,7 +31,7 @@ def spinning_beam(
     height: float = 0.06,
     thickness: float = 0.01,
     material: SIMP = SIMP(),
-) -> FlexibleRodCase:
+) -> Case:
     """The rod of REFERENCE_CASE §1–2 spinning at constant angular speed about its pinned end A.
 
     A [`GroundRevolute`][] holds A at the inertial origin and an [`AngleDriver`][] prescribes the
@@ -39,7 +39,7 @@ def spinning_beam(
     B on the rotating radial line, transversally). The rod starts unstressed at `theta = 0`,
     already turning at `speed`, with a small transverse perturbation `q_1(0) = perturbation` of
     its first (bending) mode. With `stiffening` the scene holds a [`GeometricStiffening`][] of the
-    rod, whose `K_geo(x)` [`FlexibleRodCase.scene`][] recomputes for every design; without it the
+    rod, whose `K_geo(x)` [`Case.scene`][] recomputes for every design; without it the
     bending modes are softened by the rotation, with it they stiffen (Southwell).
     Coordinates `y_r = (R_x, R_y, theta, q)`, independent `y = q`, dependent `(R_x, R_y, theta)`.
     The objective is the integral compliance (paper eq. 49).
@@ -50,15 +50,14 @@ def spinning_beam(
     - `stiffening`: include the geometric stiffening effect (static structure).
     - `length`, `height`, `thickness`, `material`: the rod.
 
-    **Returns:** a [`FlexibleRodCase`][].
+    **Returns:** a [`Case`][].
     """
     if t1 <= 0:
         raise ValueError(f"t1 must be positive, got {t1}.")
-    mesh = RodMesh(nx, ny, length, height, thickness)
-    design = RodDesign(mesh, material)
+    body = rod_body(nx, ny, n_modes, length=length, height=height, thickness=thickness, material=material)
     forces = (GeometricStiffening(body=0, modal_geometric_stiffness=jnp.zeros((n_modes, n_modes))),) if stiffening else ()
     scene = Scene(
-        bodies=(Body("rod", rod_template(design, n_modes)),),
+        bodies=(Body("rod", body.uniform_body_data()),),
         constraints=(
             GroundRevolute(body=0, marker=0, point=(0.0, 0.0)),
             AngleDriver(body=0, angle=ConstantSpeedLaw(speed)),
@@ -67,20 +66,9 @@ def spinning_beam(
     )
     y_r0 = jnp.zeros(scene.n_coordinates).at[3].set(float(perturbation))
     z_r0 = jnp.zeros(scene.n_coordinates).at[2].set(float(speed))
-    partition = choose_partition(scene, 0.0, y_r0, prefer_dependent=(0, 1, 2))
-    model = MinimalModel(partition=partition, reference_dependent=y_r0[np.asarray(partition.dependent)])
-    case = FlexibleRodCase(
-        design=design,
-        n_modes=n_modes,
-        body=0,
-        scene_template=scene,
-        model=model,
-        integrand=Compliance(body=0),
-        t0=0.0,
-        t1=float(t1),
-        y_r0=y_r0,
-        z_r0=z_r0,
-    )
+    problem = Problem(scene, t1, positions=y_r0, velocities=z_r0, objective=Compliance(body=0))
+    case = Case(problem=problem, design_map=DesignMap({"rod": body}))
     # The template carries K_geo of the uniform design the template's body data belong to.
-    template = case.scene(case.initial_design(0.5)) if stiffening else scene
-    return eqx.tree_at(lambda c: c.scene_template, case, template)
+    if stiffening:
+        case = eqx.tree_at(lambda c: c.problem.scene, case, case.scene(case.initial_design(0.5)))
+    return case

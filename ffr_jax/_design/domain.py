@@ -1,0 +1,129 @@
+"""Element roles over a mesh (design / passive solid / passive void) and the design-vector layout."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from .mesh import QuadMesh, StructuredGrid, _format_ids
+
+DESIGN, SOLID, VOID = 0, 1, 2
+_ROLE_NAMES = {DESIGN: "design", SOLID: "passive solid", VOID: "passive void"}
+
+
+class DesignDomain(eqx.Module):
+    """Which elements of a mesh carry a design variable, and which are passive solid or void.
+
+    The design vector `x` holds one density per design element, in ascending element order.
+    Passive solid elements have `x_e = 1` and passive void elements `x_e = x_min` (SIMP's lower
+    bound); neither carries a design variable, so no gradient reaches them.
+
+    - `mesh`: the mesh (static).
+    - `roles`: `(n_elements,)` int8, `DESIGN = 0`, `SOLID = 1`, `VOID = 2`.
+    - `design_elements`: `(n_design,)` element index of each design variable (a pytree leaf, so
+      that a compiled program receives it as an input rather than as a constant).
+
+    Build it with [`DesignDomain.from_masks`][] or from a role array.
+    """
+
+    mesh: QuadMesh = eqx.field(static=True)
+    roles: Int[Array, " n_elements"]
+    design_elements: Int[Array, " n_design"]
+    n_design: int = eqx.field(static=True)
+
+    def __init__(self, mesh: QuadMesh, roles=None):
+        if not isinstance(mesh, QuadMesh):
+            raise TypeError(f"mesh must be a QuadMesh, got {type(mesh).__name__}.")
+        roles = np.zeros(mesh.n_elements, dtype=np.int8) if roles is None else np.asarray(roles)
+        if roles.shape != (mesh.n_elements,):
+            raise ValueError(f"roles must have shape ({mesh.n_elements},) (one per element), got {roles.shape}.")
+        bad = np.flatnonzero(~np.isin(roles, list(_ROLE_NAMES)))
+        if bad.size:
+            raise ValueError(f"roles must be DESIGN (0), SOLID (1) or VOID (2); elements {_format_ids(bad)} are not.")
+        design = np.flatnonzero(roles == DESIGN)
+        if design.size == 0:
+            raise ValueError("The domain has no design element (every element is passive).")
+        self.mesh = mesh
+        self.roles = jnp.asarray(roles, dtype=jnp.int8)
+        self.design_elements = jnp.asarray(design, dtype=jnp.int32)
+        self.n_design = int(design.size)
+
+    @classmethod
+    def from_masks(cls, mesh: QuadMesh, solid=None, void=None) -> "DesignDomain":
+        """Roles from boolean element masks `(n_elements,)`: `solid` and `void` (disjoint), the rest design."""
+        roles = np.zeros(mesh.n_elements, dtype=np.int8)
+        for name, mask, role in (("solid", solid, SOLID), ("void", void, VOID)):
+            if mask is None:
+                continue
+            mask = np.asarray(mask)
+            if mask.shape != (mesh.n_elements,) or mask.dtype != bool:
+                raise ValueError(f"The {name} mask must be a boolean array of shape ({mesh.n_elements},), "
+                                 f"got {mask.dtype} {mask.shape}.")
+            clash = np.flatnonzero(mask & (roles != DESIGN))
+            if clash.size:
+                raise ValueError(f"Elements {_format_ids(clash)} are marked both solid and void.")
+            roles[mask] = role
+        return cls(mesh, roles)
+
+    def role_array(self) -> np.ndarray:
+        """The roles as a NumPy array (host side: filters, plots)."""
+        return np.asarray(self.roles)
+
+    def design_centroids(self) -> np.ndarray:
+        """Centroids `(n_design, 2)` of the design elements, in design order."""
+        return self.mesh.element_centroids()[np.asarray(self.design_elements)]
+
+    def design_areas(self) -> np.ndarray:
+        """Areas `(n_design,)` of the design elements (volume weights), in design order."""
+        return self.mesh.element_areas()[np.asarray(self.design_elements)]
+
+    def design_grid(self, values) -> np.ndarray:
+        """A design-ordered vector `(n_design,)` as the rectangular block of grid elements it covers.
+
+        Needs a [`StructuredGrid`][] whose design elements fill whole rows and columns of a
+        rectangle, e.g. the rod (`(ny, nx - 2)`: rows bottom to top, the solid end columns left out).
+
+        **Returns:** `(rows, columns)` NumPy array.
+        """
+        mesh = self.mesh
+        if not isinstance(mesh, StructuredGrid):
+            raise ValueError("design_grid needs a structured grid (e.g. the rod); on another mesh, plot the values "
+                             "over the elements (DesignDomain.design_elements gives each value's element).")
+        elements = np.asarray(self.design_elements)
+        rows, columns = np.unique(elements // mesh.nx), np.unique(elements % mesh.nx)
+        if rows.size * columns.size != elements.size:
+            raise ValueError("The design elements do not fill a rectangle of the grid; design_grid cannot arrange them.")
+        values = np.asarray(values)
+        if values.shape != (self.n_design,):
+            raise ValueError(f"design_grid takes a vector of shape ({self.n_design},), got {values.shape}.")
+        return values.reshape(rows.size, columns.size)
+
+    def initial_design(self, value: float = 0.5) -> Float[Array, " n_design"]:
+        """A uniform design `x_e = value`."""
+        return jnp.full((self.n_design,), float(value))
+
+    def check(self, x, x_min: float, body: str | None = None) -> Float[Array, " n_design"]:
+        """Validate a design: shape at trace time; NaN and the bounds `[x_min, 1]` at run time.
+
+        `body` (optional) names the body in the messages.
+        """
+        of_body = "" if body is None else f" for body {body!r}"
+        x = jnp.asarray(x)
+        if x.shape != (self.n_design,):
+            raise ValueError(
+                f"Design vector has shape {x.shape}, expected ({self.n_design},){of_body}: one density per design "
+                f"element ({self.mesh.n_elements} elements, {self.mesh.n_elements - self.n_design} passive). "
+                "Use initial_design(value) for a valid vector."
+            )
+        if not jnp.issubdtype(x.dtype, jnp.floating):
+            x = x.astype(float)
+        x = eqx.error_if(x, jnp.any(jnp.isnan(x)), f"Design vector contains NaN{of_body}.")
+        return eqx.error_if(
+            x, jnp.any((x < x_min) | (x > 1.0)),
+            f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; clip or project the design first.",
+        )
+
+    def element_densities(self, x, x_min: float) -> Float[Array, " n_elements"]:
+        """All element densities `(n_elements,)`: `x` on design elements, 1 on solid, `x_min` on void."""
+        passive = jnp.where(self.roles == SOLID, 1.0, jnp.where(self.roles == VOID, x_min, 0.0)).astype(x.dtype)
+        return passive.at[self.design_elements].set(x)
