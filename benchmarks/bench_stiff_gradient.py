@@ -35,7 +35,7 @@ HERE = pathlib.Path(__file__).parent
 RESULTS = HERE / "results"
 
 
-def _method(name, rtol, backward_rtol, chunk):
+def _method(name, rtol, backward_rtol, chunk, backward_atol=None):
     import diffrax
 
     import ffr_jax
@@ -45,12 +45,14 @@ def _method(name, rtol, backward_rtol, chunk):
     solver = {"dopri8": diffrax.Dopri8(), "rodas5p": Rodas5P()}[solver_name]
     if kind == "adjoint":
         b = rtol if backward_rtol is None else backward_rtol
-        return ffr_jax.Adjoint(rtol=b, atol=b * 1e-2, solver=solver, chunk=chunk), solver
+        a = b * 1e-2 if backward_atol is None else backward_atol
+        return ffr_jax.Adjoint(rtol=b, atol=a, solver=solver, chunk=chunk), solver
     if kind == "autodiff":
         return ffr_jax.Autodiff(), solver
     if kind == "backsolve":
         b = rtol if backward_rtol is None else backward_rtol
-        return ffr_jax.Backsolve(rtol=b, atol=b * 1e-2), solver
+        a = b * 1e-2 if backward_atol is None else backward_atol
+        return ffr_jax.Backsolve(rtol=b, atol=a), solver
     raise ValueError(name)
 
 
@@ -75,10 +77,17 @@ def worker(spec):
 
     import ffr_jax
 
-    case = ffr_jax.cases.slider_crank(n_modes=spec["modes"])
+    mesh = spec.get("mesh")  # None: the reference case (100 x 6, t1 = 3 s)
+    if mesh is None:
+        case = ffr_jax.cases.slider_crank(n_modes=spec["modes"])
+        tag = f"{spec['modes']}"
+    else:
+        case = ffr_jax.cases.slider_crank(mesh[0], mesh[1], spec["modes"], mesh[2])
+        tag = f"{spec['modes']}_{mesh[0]}x{mesh[1]}_t{mesh[2]:g}"
     x = case.initial_design(0.5)
-    psi_ref, grad_ref = reference(case, x, RESULTS / f"stiff_gradient_ref_{spec['modes']}.npz")
-    method, solver = _method(spec["method"], spec["rtol"], spec["backward_rtol"], spec["chunk"])
+    psi_ref, grad_ref = reference(case, x, RESULTS / f"stiff_gradient_ref_{tag}.npz")
+    method, solver = _method(spec["method"], spec["rtol"], spec["backward_rtol"], spec["chunk"],
+                             spec.get("backward_atol"))
     rtol = spec["rtol"]
 
     @eqx.filter_jit
@@ -98,6 +107,11 @@ def worker(spec):
         if samples[-1] > spec["slow_s"]:
             break
     grad = np.asarray(grad)
+    if spec.get("save_dir"):
+        save = pathlib.Path(spec["save_dir"])
+        save.mkdir(parents=True, exist_ok=True)
+        np.savez(save / f"{tag}_{spec['method'].replace(':', '_')}_{spec['rtol']:g}.npz", psi=float(psi), grad=grad,
+                 psi_ref=psi_ref, grad_ref=grad_ref)
     out.update(run_s=statistics.median(samples), runs=len(samples), psi=float(psi),
                psi_rel_error=abs(float(psi) - psi_ref) / abs(psi_ref),
                grad_rel_error=float(np.max(np.abs(grad - grad_ref)) / np.max(np.abs(grad_ref))),
@@ -118,7 +132,9 @@ def worker(spec):
 
 
 def markdown(data):
-    lines = [f"Command: `{data['command']}`", "", f"Machine: {data['machine']}; {data['threads']}.", "",
+    loads = [r["load"][0] for r in data["rows"] if "load" in r]
+    load = f" Load average (1 min) at the end of the rows: {min(loads):.1f}..{max(loads):.1f} on 2 cores." if loads else ""
+    lines = [f"Command: `{data['command']}`", "", f"Machine: {data['machine']}; {data['threads']}.{load}", "",
              "| modes | method:solver | rtol fwd / bwd | compile [s] | run [s] | forward [s] (steps) | run / forward | "
              "psi rel. error | grad rel. error (max norm) | peak RSS [MB] |",
              "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
@@ -141,7 +157,13 @@ def main():
                                                          "autodiff:rodas5p"])
     parser.add_argument("--rtols", type=float, nargs="+", default=[1e-6, 1e-8])
     parser.add_argument("--backward-rtol", type=float, default=None)
-    parser.add_argument("--chunk", type=int, default=256)
+    parser.add_argument("--backward-atol", type=float, default=None,
+                        help="atol of the adjoint/backsolve backward solve (default 1e-2 of its rtol; the adjoint "
+                             "states are of the size of psi, so small cases need ~1e-16)")
+    parser.add_argument("--chunk", type=int, default=None, help="Adjoint(chunk=...); default: sized by the parameters")
+    parser.add_argument("--mesh", type=float, nargs=3, default=None, metavar=("NX", "NY", "T1"),
+                        help="a smaller slider-crank (default: the reference case 100 x 6, t1 = 3 s)")
+    parser.add_argument("--out", default="stiff_gradient", help="name of the results files")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--slow-s", type=float, default=60.0)
     parser.add_argument("--max-steps", type=int, default=200_000)
@@ -159,7 +181,9 @@ def main():
         for method in args.methods:
             for rtol in args.rtols:
                 spec = {"modes": n_modes, "method": method, "rtol": rtol, "backward_rtol": args.backward_rtol,
-                        "chunk": args.chunk, "runs": args.runs, "slow_s": args.slow_s, "max_steps": args.max_steps}
+                        "chunk": args.chunk, "backward_atol": args.backward_atol, "runs": args.runs, "slow_s": args.slow_s, "max_steps": args.max_steps,
+                        "save_dir": str(RESULTS / f"{args.out}_gradients"),
+                        "mesh": None if args.mesh is None else [int(args.mesh[0]), int(args.mesh[1]), args.mesh[2]]}
                 try:
                     proc = subprocess.run([sys.executable, __file__, "--worker", json.dumps(spec)], capture_output=True,
                                           text=True, timeout=args.timeout, env={**os.environ, "PYTHONPATH": str(HERE.parent)})
@@ -177,8 +201,8 @@ def main():
     text = markdown(data)
     print(text)
     if not args.no_write:
-        (RESULTS / "stiff_gradient.json").write_text(json.dumps(data, indent=1))
-        (RESULTS / "stiff_gradient.md").write_text(text)
+        (RESULTS / f"{args.out}.json").write_text(json.dumps(data, indent=1))
+        (RESULTS / f"{args.out}.md").write_text(text)
 
 
 if __name__ == "__main__":

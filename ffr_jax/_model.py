@@ -336,7 +336,11 @@ def _solve_dependent(model, t, y, scene):
 def _solve_dependent_jvp(primals, tangents):
     model, t, y, scene = primals
     _, dt, dy, dscene = _zeros_for_none(primals, tangents)
-    y_d = _newton(model, t, y, scene)
+    # The primal through the custom rule itself, not `_newton`: when this rule is differentiated
+    # again (reverse mode through a solver that linearises the vector field, e.g. a Rosenbrock
+    # method under `jax.grad`), the Newton while-loop would otherwise be transposed, which JAX
+    # cannot do; through the rule, the second derivative is again a linear solve.
+    y_d = _solve_dependent(model, t, y, scene)
 
     def residual(t_, y_, scene_):
         return scene_.constraint_residual(t_, model.assemble(y_, y_d))
