@@ -17,6 +17,8 @@ Usage: `python benchmarks/probe_gradient_guard.py [--modes 20] [--out benchmarks
 
 import argparse
 import json
+import os
+import resource
 import pathlib
 import statistics
 import time
@@ -110,6 +112,9 @@ def main():
                                             "fd_reference": fd_ref,
                                             "rel_reference": abs(gd - fd_ref) / max(abs(gd), abs(fd_ref), 1e-300)}
         row["guard_cost_over_gradient"] = 2 * forward_s / run_s
+        # The process's peak so far (rows run in order, so a row's own peak is at most this).
+        row["peak_rss_mb_so_far"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        row["load"] = os.getloadavg()
         rows.append(row)
         print(json.dumps(row), flush=True)
     # Reference gradient: the central differences of psi at rtol 1e-12 (Dopri8) along each gradient's

@@ -164,6 +164,8 @@ def value_and_grad(target, x: Designs | None = None, method: str | AbstractSensi
     - `rtol`, `atol`: forward tolerances (the paper's 1e-10 / 1e-12 by default).
     - `solver`: diffrax solver of the forward solve (default `Dopri8()`); the adjoint and backsolve
       methods integrate backward with the same solver when one is given, else with `Dopri8()`.
+      The stiff route, `solver=ffr_jax.Rodas5P()` (a linearly implicit Rosenbrock method, not
+      limited by the highest retained frequency), works with every method (tests/test_stiff_route.py).
     - `max_steps`: step budget of each solve. The adjoint method keeps the dense output of its
       forward and backward solves for that many steps (about 1 KB per step each; the reference
       case needs about 8,000 forward and 13,000 backward steps), so the default is 200,000 rather

@@ -55,7 +55,11 @@ def _method(name):
     return {"adjoint": fj.Adjoint(**BACKWARD), "autodiff": fj.Autodiff(), "backsolve": fj.Backsolve(**BACKWARD)}[name]
 
 
-@pytest.mark.parametrize("name", ["adjoint", "autodiff", "backsolve"])
+# Autodiff and backsolve through Rodas5P compile reverse mode through the solver's linearisation
+# (about 4-5 minutes each on the loaded 2-core machine, against 3.6 for the adjoint): marked slow
+# to keep the default suite within its budget; the adjoint, the project's method, runs by default.
+@pytest.mark.parametrize("name", ["adjoint", pytest.param("autodiff", marks=pytest.mark.slow),
+                                  pytest.param("backsolve", marks=pytest.mark.slow)])
 def test_stiff_route_gives_the_explicit_psi_and_gradient(case, x, explicit, name):
     psi, grad = fj.value_and_grad(case, x, _method(name), rtol=RTOL, atol=ATOL, solver=fj.Rodas5P())
     psi_ref, grad_ref = explicit
@@ -80,21 +84,18 @@ def test_gradient_check_accepts_the_gradient_and_rejects_wrong_ones(case, x, exp
         assert "Untrustworthy gradient" in check.message()
 
 
-class _WrongGradient(fj.Autodiff):
-    """Autodiff with its gradient's sign flipped: a method returning a wrong gradient."""
-
-    def value_and_grad_problem(self, problem, **kwargs):
-        import jax
-
-        psi, grad = super().value_and_grad_problem(problem, **kwargs)
-        return psi, jax.tree_util.tree_map(lambda g: -g, grad)
-
-
-def test_value_and_grad_check_raises_on_a_wrong_gradient(case, x, explicit):
+def test_value_and_grad_check_raises_on_a_wrong_gradient(case, x, explicit, monkeypatch):
+    # The right gradient passes (the autodiff program of the `explicit` fixture, reused).
     psi, grad = fj.value_and_grad(case, x, "autodiff", rtol=RTOL, atol=ATOL, check=True)
     np.testing.assert_array_equal(np.asarray(grad), explicit[1])
+    # A method returning a wrong gradient (here: the compiled program's result with its sign
+    # flipped, standing in for a method that differentiated the discrete solution wrongly) raises.
+    import ffr_jax._api as api
+
+    compiled = api._value_and_grad_design
+    monkeypatch.setattr(api, "_value_and_grad_design", lambda *a: (lambda p, g: (p, -g))(*compiled(*a)))
     with pytest.raises(ValueError, match="Untrustworthy gradient"):
-        fj.value_and_grad(case, x, _WrongGradient(), rtol=RTOL, atol=ATOL, check=True)
+        fj.value_and_grad(case, x, "autodiff", rtol=RTOL, atol=ATOL, check=True)
 
 
 def test_quadrature_chunk_is_bounded_by_the_number_of_parameters():
