@@ -316,7 +316,9 @@ class Adjoint(AbstractSensitivity):
     - `rtol`, `atol`: tolerances of the backward solve (the paper's 1e-8 / 1e-10 by default).
     - `solver`: the backward solver (default: the forward solver where one is given, else
       `Dopri8()`: at the paper's tolerances it takes a quarter of the steps of `Tsit5()` on the
-      reference case, and its 7th-order dense output feeds the quadrature).
+      reference case, and its 7th-order dense output feeds the quadrature). `ffr_jax.Rodas5P()`
+      (the stiff route) works too: the backward ODE is linear in `(mu, w)`, so each of its
+      linearly implicit stages is solved exactly with the Jacobian it forms.
     - `quadrature`: Gauss–Legendre nodes per backward step (default 3: exact for polynomials of
       degree 5 on each step), or `None`.
     - `chunk`: backward steps per vectorised quadrature batch (default `None`: sized by the
