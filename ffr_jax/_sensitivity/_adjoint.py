@@ -318,7 +318,8 @@ class Adjoint(AbstractSensitivity):
       `Dopri8()`: at the paper's tolerances it takes a quarter of the steps of `Tsit5()` on the
       reference case, and its 7th-order dense output feeds the quadrature). `ffr_jax.Rodas5P()`
       (the stiff route) works too: the backward ODE is linear in `(mu, w)`, so each of its
-      linearly implicit stages is solved exactly with the Jacobian it forms.
+      linearly implicit stages is solved exactly with the Jacobian it forms (checked on small
+      cases; at 20 modes the gradient was off by 2e-3, benchmarks/RESULTS.md).
     - `quadrature`: Gauss–Legendre nodes per backward step (default 3: exact for polynomials of
       degree 5 on each step), or `None`.
     - `chunk`: backward steps per vectorised quadrature batch (default `None`: sized by the
