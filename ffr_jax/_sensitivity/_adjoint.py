@@ -319,7 +319,7 @@ class Adjoint(AbstractSensitivity):
       reference case, and its 7th-order dense output feeds the quadrature). `ffr_jax.Rodas5P()`
       (the stiff route) works too: the backward ODE is linear in `(mu, w)`, so each of its
       linearly implicit stages is solved exactly with the Jacobian it forms (checked on small
-      cases; at 20 modes the gradient was off by 2e-3, benchmarks/RESULTS.md).
+      cases; at 20 modes it and autodiff through Rodas5P differed from Dopri8 by 2e-3, benchmarks/RESULTS.md).
     - `quadrature`: Gauss–Legendre nodes per backward step (default 3: exact for polynomials of
       degree 5 on each step), or `None`.
     - `chunk`: backward steps per vectorised quadrature batch (default `None`: sized by the
