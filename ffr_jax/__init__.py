@@ -22,6 +22,7 @@ from ._design import (
     retained_eigenpairs as retained_eigenpairs, rod_domain as rod_domain, rod_joint_nodes as rod_joint_nodes,
     structured_grid as structured_grid, write_mesh as write_mesh,
 )
+from ._gradient_check import GradientCheck as GradientCheck, check_gradient as check_gradient
 from ._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient, row_signs as row_signs
 from ._io._animation import Animation as Animation, animate as animate, body_motion as body_motion
 from ._io._outline import density_outline as density_outline, write_dxf as write_dxf, write_svg as write_svg
@@ -57,6 +58,7 @@ from ._sensitivity._base import AbstractSensitivity as AbstractSensitivity
 from ._sensitivity._direct import Direct as Direct
 from ._sensitivity._finite_differences import FiniteDifferences as FiniteDifferences
 from ._sharding import sharded_map as sharded_map
+from ._solver import Rodas4 as Rodas4, Rodas5P as Rodas5P
 from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state
 from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
 from ._optimize._conditions import OperatingConditions as OperatingConditions

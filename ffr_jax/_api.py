@@ -193,7 +193,7 @@ def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, ato
 @clean_errors
 def value_and_grad(target, x: DesignsInput | None = None, method: str | AbstractSensitivity = "adjoint", *,
                    rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
-                   max_steps: int = 200_000):
+                   max_steps: int = 200_000, check: bool = False):
     """`(psi, grad psi)` of a case with respect to its design, or of a problem with respect to its arrays.
 
     **Arguments:**
@@ -207,10 +207,18 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
     - `rtol`, `atol`: forward tolerances (the paper's 1e-10 / 1e-12 by default).
     - `solver`: diffrax solver of the forward solve (default `Dopri8()`); the adjoint and backsolve
       methods integrate backward with the same solver when one is given, else with `Dopri8()`.
+      The stiff route, `solver=ffr_jax.Rodas5P()` (a linearly implicit Rosenbrock method, not
+      limited by the highest retained frequency), works with every method (tests/test_stiff_route.py).
     - `max_steps`: step budget of each solve. The adjoint method keeps the dense output of its
       forward and backward solves for that many steps (about 1 KB per step each; the reference
       case needs about 8,000 forward and 13,000 backward steps), so the default is 200,000 rather
       than the 1,000,000 of [`objective`][]: raise it for long horizons or low-order solvers.
+    - `check`: for a case, check the gradient by its directional derivative along itself against a
+      central difference of psi (two more forward solves, [`check_gradient`][]) and raise a
+      `ValueError` saying so where they disagree. Every method differentiates a discrete solution;
+      autodiff through an explicit solver at its stability limit (many retained modes) can return
+      the derivative of the discrete solution with wrong signs (benchmarks/RESULTS.md, "How many
+      modes"). Not under `jax.jit`/`jax.vmap` (it needs the values).
 
     **Returns:** `(psi, grad)`: for a case, `grad` has the structure of `x` (a dict of arrays for a
     dict design, one forward and one backward solve for all bodies); for a problem, a
@@ -230,9 +238,20 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
     _check_options("ffr_jax.value_and_grad", rtol, atol, max_steps)
     if isinstance(target, Problem):
         problem, method = _problem_and_method(target, x, method)
+        if check:
+            raise ValueError("value_and_grad(problem, check=True): the gradient check differences a design; "
+                             "build a Case (problem + design map) to check a design gradient.")
         return _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps)
     method = sensitivity_method(method)
-    return _value_and_grad_design(target, _design(target, x, "value_and_grad"), method, rtol, atol, solver, max_steps)
+    x = _design(target, x, "value_and_grad")
+    psi, grad = _value_and_grad_design(target, x, method, rtol, atol, solver, max_steps)
+    if check:
+        from ._gradient_check import check_gradient
+
+        result = check_gradient(target, x, grad, rtol=rtol, atol=atol, solver=solver)
+        if not result.trusted:
+            raise ValueError(result.message())
+    return psi, grad
 
 
 @clean_errors

@@ -1,5 +1,7 @@
 """Forward simulation of the minimal equations of motion with diffrax."""
 
+import dataclasses
+
 import diffrax
 import equinox as eqx
 import jax
@@ -93,6 +95,7 @@ def solve_minimal(
     adjoint: diffrax.AbstractAdjoint | None = None,
     jump_ts: tuple[float, ...] = (),
     dt0: float | None = None,
+    controller: diffrax.PIDController | None = None,
 ) -> Trajectory:
     """Integrate the minimal equations of motion `(y, z)' = (z, Mbar^-1 (fbar - gammabar))` from the
     independent initial state `(y0, z0)`, with `psi = G(t1) + int F dt` alongside.
@@ -120,7 +123,12 @@ def solve_minimal(
     y0, z0 = jnp.asarray(y0, float), jnp.asarray(z0, float)
     state0 = (y0, z0) if integrand is None else (y0, z0, jnp.zeros((), y0.dtype))
     jumps = tuple(j for j in jump_ts if t0 < j < t1)
-    controller = diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=jnp.asarray(jumps) if jumps else None)
+    if controller is None:
+        controller = diffrax.PIDController(rtol=rtol, atol=atol)
+    elif type(controller) is not diffrax.PIDController:
+        raise ValueError(f"controller= takes a diffrax.PIDController without jump_ts or step_ts "
+                         f"(the drivers' switch times are added here), got {type(controller).__name__}.")
+    controller = dataclasses.replace(controller, rtol=rtol, atol=atol, jump_ts=jnp.asarray(jumps) if jumps else None)
     # The final state is always saved (for psi and the terminal term), beside the requested times.
     if ts is None:
         saveat = diffrax.SaveAt(t1=True, dense=dense)
@@ -164,6 +172,7 @@ def simulate(
     adjoint: diffrax.AbstractAdjoint | None = None,
     jump_ts: tuple[float, ...] = (),
     dt0: float | None = None,
+    controller: diffrax.PIDController | None = None,
 ) -> Trajectory:
     """Integrate the minimal equations of motion from consistent redundant initial conditions.
 
@@ -184,6 +193,9 @@ def simulate(
       `dense=True` the dense output is stored for that many steps (about 1 KB per step with Dopri8).
     - `adjoint`: diffrax adjoint used when differentiating through the solve.
     - `jump_ts`: times where the drivers switch pieces (the step-size controller lands on them).
+    - `controller`: a `diffrax.PIDController` whose settings other than the tolerances (`pcoeff`,
+      `icoeff`, `norm`, `factormax`, ...) replace diffrax's defaults; its `rtol`, `atol` are
+      replaced by the arguments above.
 
     **Returns:** a [`Trajectory`][].
     """
@@ -191,4 +203,5 @@ def simulate(
     return solve_minimal(
         model, scene, t0, t1, y0, z0, integrand=integrand, solver=solver, rtol=rtol, atol=atol, ts=ts,
         dense=dense, max_steps=max_steps, adjoint=adjoint, jump_ts=jump_ts, dt0=dt0,
+        controller=controller,
     )

@@ -99,8 +99,12 @@ def matmul(a, b):
     """`a @ b` for tiny matrices (or a matrix and a vector), as a broadcast product and a sum.
 
     XLA:CPU hands every `dot` to a library kernel whose fixed cost exceeds the arithmetic of a
-    9 x 9 product; the elementwise form fuses into a single loop kernel.
+    9 x 9 product; the elementwise form fuses into a single loop kernel. Above `UNROLL_MAX` rows
+    or columns the elementwise form materialises an `n^3` array (under `jax.vmap` of a Jacobian's
+    tangents, one per tangent), so `dot` is used there.
     """
+    if max(a.shape + b.shape) > UNROLL_MAX:
+        return a @ b
     if b.ndim == 1:
         return jnp.sum(a * b[None, :], axis=1)
     return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
@@ -120,7 +124,7 @@ def lu_solve(lu: LU, b, trans: int = 0):
         x = jnp.sum(inv[:, :, None] * x[None, :, :], axis=1)
         return x[:, 0] if vector else x
     if n > UNROLL_MAX:
-        perm_inv = jnp.zeros_like(lu.perm).at[lu.perm].set(jnp.arange(n))
+        perm_inv = jnp.zeros_like(lu.perm).at[lu.perm].set(jnp.arange(n, dtype=lu.perm.dtype))
         if trans == 0:
             x = jsl.solve_triangular(lu.lu, x[lu.perm], lower=True, unit_diagonal=True)
             x = jsl.solve_triangular(lu.lu, x, lower=False)
@@ -155,7 +159,7 @@ def spd_solve(a, b):
     """
     n = a.shape[0]
     if n > UNROLL_MAX:
-        return jsl.cho_solve(jsl.cho_factor(a), b)
+        return _cholesky_solve(a, b)
     vector = b.ndim == 1
     aug = jnp.concatenate([a, b[:, None] if vector else b], axis=1)
     unit = jnp.eye(n, dtype=aug.dtype)
@@ -164,3 +168,26 @@ def spd_solve(a, b):
         aug = aug - (aug[:, k] - unit[:, k])[:, None] * row[None, :]
     x = aug[:, n:]
     return x[:, 0] if vector else x
+
+
+@jax.custom_jvp
+def _cholesky_solve(a, b):
+    """`A^-1 b` by LAPACK Cholesky, differentiated through the solution (one factorisation).
+
+    `A` and its tangent are taken as symmetric (the factorisation reads one triangle), as the
+    mass matrices passed here are.
+    """
+    return jsl.cho_solve(jsl.cho_factor(a), b)
+
+
+@_cholesky_solve.defjvp
+def _cholesky_solve_jvp(primals, tangents):
+    # d(A^-1 b) = A^-1 (db - dA x), solved with the primal factor. Differentiating through the
+    # factorisation instead costs a batched Cholesky derivative per tangent: under `jax.vmap` of the
+    # tangents (a Jacobian by `jax.jacfwd`) XLA:CPU takes about 12 ms for 62 tangents at n = 30,
+    # against 29 us this way.
+    a, b = primals
+    da, db = tangents
+    factor = jsl.cho_factor(a)
+    x = jsl.cho_solve(factor, b)
+    return x, jsl.cho_solve(factor, db - da @ x)

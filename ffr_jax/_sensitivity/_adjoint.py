@@ -211,20 +211,44 @@ def terminal_products(problem: Problem, t, y, z, params):
     return constrained_gradient(problem, t, y_r, z_r, params, phi, design=True)
 
 
+QUADRATURE_BATCH = 2**17
+"""Default size of one vectorised quadrature batch, in nodes times parameters (see [`quadrature_chunk`][])."""
+
+
+def quadrature_chunk(order: int, n_params: int, chunk: int | None = None) -> int:
+    """Backward steps per vectorised quadrature batch: `chunk` when given, else
+    `clip(QUADRATURE_BATCH // (order n_params), 1, 256)`.
+
+    A batch evaluates the reverse pass of eq. 44's integrand at `chunk * order` nodes at once, and
+    its intermediates grow with the number of parameters `n_params` (about `3 n_modes^2` body-data
+    entries per flexible body). A fixed 256 steps (768 nodes) fits at 6 modes (181 parameters on
+    the slider-crank) but made the quadrature, not the backward solve, the cost at 20-40 modes
+    (1,385-5,145 parameters: minutes and 3-10 GB, where 16 steps took 24 s; issue 15). The
+    default keeps `chunk * order * n_params` near `2^17` (about 1 MB of gradient rows per batch,
+    and the intermediates a few hundred times that): 241 steps at 6 modes, 31 at 20, 8 at 40.
+    """
+    if chunk is not None:
+        return chunk
+    return int(min(256, max(1, QUADRATURE_BATCH // (order * max(n_params, 1)))))
+
+
 def gauss_legendre(order: int):
     """Nodes in `[0, 1]` and weights (summing to 1) of the `order`-point Gauss–Legendre rule."""
     nodes, weights = np.polynomial.legendre.leggauss(order)
     return 0.5 * (nodes + 1.0), 0.5 * weights
 
 
-def _quadrature_on_steps(problem, params, forward, backward: diffrax.DenseInterpolation, order: int, chunk: int):
+def _quadrature_on_steps(problem, params, forward, backward: diffrax.DenseInterpolation, order: int,
+                         chunk: int | None):
     """`int_{t0}^{t1} (R2 - mu^T S3 - nu^T T3) dt` (paper eq. 44) as a flat `(n_p,)` vector.
 
     Gauss–Legendre with `order` nodes on every accepted backward step, `(mu, Mbar nu)` from the
     step's own dense interpolant and `(y, z)` from the forward dense output. The steps are processed
     `chunk` at a time, every node of a chunk in one `jax.vmap`; steps past the last one are padded
-    (repeating the last step with weight zero).
+    (repeating the last step with weight zero). `chunk=None`: sized by [`quadrature_chunk`][].
     """
+    n_p = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[0].size
+    chunk = quadrature_chunk(order, n_p, chunk)
     unit_nodes, unit_weights = (jnp.asarray(a) for a in gauss_legendre(order))
     n_steps = backward.ts_size - 1
     taus, infos, direction = backward.ts, backward.infos, backward.direction
@@ -255,7 +279,6 @@ def _quadrature_on_steps(problem, params, forward, backward: diffrax.DenseInterp
         k, total = carry
         return k + 1, total + chunk_sum(k)
 
-    n_p = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[0].size
     _, total = jax.lax.while_loop(lambda carry: carry[0] * chunk < n_steps, body,
                                   (jnp.zeros((), n_steps.dtype), jnp.zeros(n_p)))
     return total
@@ -294,10 +317,15 @@ class Adjoint(AbstractSensitivity):
     - `rtol`, `atol`: tolerances of the backward solve (the paper's 1e-8 / 1e-10 by default).
     - `solver`: the backward solver (default: the forward solver where one is given, else
       `Dopri8()`: at the paper's tolerances it takes a quarter of the steps of `Tsit5()` on the
-      reference case, and its 7th-order dense output feeds the quadrature).
+      reference case, and its 7th-order dense output feeds the quadrature). `ffr_jax.Rodas5P()`
+      (the stiff route) works too: the backward ODE is linear in `(mu, w)`, so each of its
+      linearly implicit stages is solved exactly with the Jacobian it forms (checked on small
+      cases; at 20 modes it and autodiff through Rodas5P differed from Dopri8 by 2e-3, benchmarks/RESULTS.md).
     - `quadrature`: Gauss–Legendre nodes per backward step (default 3: exact for polynomials of
       degree 5 on each step), or `None`.
-    - `chunk`: backward steps per vectorised quadrature batch.
+    - `chunk`: backward steps per vectorised quadrature batch (default `None`: sized by the
+      number of parameters so that a batch stays near `2^17` node-parameter entries,
+      [`quadrature_chunk`][]; 241 steps at 6 modes, 8 at 40).
     - `products`: how the right-hand side of eq. 43 is formed: `"reverse"` (default: one reverse
       pass, [`adjoint_products`][]) or `"matrices"` (the paper's matrices `R1, Rz, S1, S2, T1, T2`
       from `jax.jacfwd`, [`adjoint_terms`][], multiplied out; the same numbers, about 6x the cost
@@ -315,7 +343,7 @@ class Adjoint(AbstractSensitivity):
     atol: float = 1e-10
     solver: diffrax.AbstractSolver | None = None
     quadrature: int | None = 3
-    chunk: int = 256
+    chunk: int | None = None
     products: str = eqx.field(static=True, default="reverse")
     max_steps: int | None = None
 
@@ -327,8 +355,10 @@ class Adjoint(AbstractSensitivity):
             raise ValueError(f"Adjoint(quadrature=...) must be a positive number of Gauss–Legendre nodes "
                              f"per backward step, or None to integrate the gradient in the backward ODE; "
                              f"got {self.quadrature!r}.")
-        if isinstance(self.chunk, bool) or not isinstance(self.chunk, int) or self.chunk < 1:
-            raise ValueError(f"Adjoint(chunk=...) must be a positive number of backward steps, got {self.chunk!r}.")
+        if self.chunk is not None and (isinstance(self.chunk, bool) or not isinstance(self.chunk, int)
+                                       or self.chunk < 1):
+            raise ValueError(f"Adjoint(chunk=...) must be a positive number of backward steps (or None: sized "
+                             f"by the number of parameters), got {self.chunk!r}.")
         if self.products not in ("reverse", "matrices"):
             raise ValueError(f"Adjoint(products=...) must be 'reverse' or 'matrices', got {self.products!r}.")
 

@@ -1,0 +1,107 @@
+"""The stiff route (Rosenbrock Rodas5P forward, and backward where a method solves backward) gives the
+psi and design gradient of the explicit route (Dopri8) for every gradient method, and the gradient
+guard (`check_gradient`, `value_and_grad(..., check=True)`) tells a wrong gradient from a right one
+(issue 15).
+
+One small slider-crank (10 x 2 mesh, 3 modes, t1 = 0.2 s) and one design; every program is
+compiled once in a module fixture.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ffr_jax as fj
+from ffr_jax._sensitivity._adjoint import quadrature_chunk
+
+from helpers import assert_close_relative, random_design, small_case
+
+
+RTOL, ATOL = 1e-10, 1e-12  # forward tolerances, both routes (the paper's)
+# Backward tolerances as in tests/test_sensitivity.py: the adjoint states are of the size of psi
+# (~1e-7 here), so the absolute tolerance sits well below it.
+BACKWARD = dict(rtol=1e-10, atol=1e-16)
+
+# psi: both solves carry the global error of an adaptive solve at rtol 1e-10, measured 1.1e-10
+# relative for Rodas5P on this case against Dopri8 at rtol 1e-12 (tests/test_solvers.py);
+# 1e-8 allows two orders above it.
+PSI_AGREE = 1e-8
+# Gradients: relative to the largest entry. The explicit reference is autodiff through Dopri8; the
+# same method on the two routes differs by the two discretisations' errors in the derivative
+# (each of the order of the tolerances, ~1e-9..1e-8 after the design map's VJP), and methods differ
+# from each other by 1e-6 at most at these tolerances (tests/test_sensitivity.py: adjoint vs
+# autodiff 1e-6, backsolve 1e-5). The stiff route must meet the same bounds.
+GRADIENT_AGREE = {"adjoint": 1e-6, "autodiff": 1e-6, "backsolve": 1e-5}
+
+
+@pytest.fixture(scope="module")
+def case():
+    return small_case(10, 2, 3, 0.2)
+
+
+@pytest.fixture(scope="module")
+def x(case):
+    return random_design(case, 3)
+
+
+@pytest.fixture(scope="module")
+def explicit(case, x):
+    """`(psi, grad)` by autodiff through Dopri8 (the explicit route)."""
+    psi, grad = fj.value_and_grad(case, x, "autodiff", rtol=RTOL, atol=ATOL)
+    return float(psi), np.asarray(grad)
+
+
+def _method(name):
+    return {"adjoint": fj.Adjoint(**BACKWARD), "autodiff": fj.Autodiff(), "backsolve": fj.Backsolve(**BACKWARD)}[name]
+
+
+# Autodiff and backsolve through Rodas5P compile reverse mode through the solver's linearisation
+# (about 4-5 minutes each on the loaded 2-core machine, against 3.6 for the adjoint): marked slow
+# to keep the default suite within its budget; the adjoint, the project's method, runs by default.
+@pytest.mark.parametrize("name", ["adjoint", pytest.param("autodiff", marks=pytest.mark.slow),
+                                  pytest.param("backsolve", marks=pytest.mark.slow)])
+def test_stiff_route_gives_the_explicit_psi_and_gradient(case, x, explicit, name):
+    psi, grad = fj.value_and_grad(case, x, _method(name), rtol=RTOL, atol=ATOL, solver=fj.Rodas5P())
+    psi_ref, grad_ref = explicit
+    assert abs(float(psi) - psi_ref) <= PSI_AGREE * abs(psi_ref), f"{name}: psi {float(psi)} vs {psi_ref}"
+    assert_close_relative(grad, grad_ref, GRADIENT_AGREE[name], f"{name} with Rodas5P vs autodiff with Dopri8")
+
+
+def test_gradient_check_accepts_the_gradient_and_rejects_wrong_ones(case, x, explicit):
+    _, grad = explicit
+    good = fj.check_gradient(case, x, grad)
+    assert good.trusted, good.message()
+    # A right gradient agrees with the central difference to the difference's own accuracy
+    # (truncation h^2 psi''' / 6 and noise rtol psi / h with h = 1e-4: both ~1e-6 relative on this
+    # case, as the central differences of tests/test_sensitivity.py); 100x below the tolerance.
+    assert good.error[0] < 1e-5, good.message()
+    # Wrong gradients of the kinds the guard exists for: wrong signs on part of the entries (as
+    # autodiff at the stability limit returned, issue 15) and a wrong scale.
+    flipped = np.where(np.arange(grad.size) % 2 == 0, -grad, grad)
+    for wrong in (flipped, 1.5 * grad):
+        check = fj.check_gradient(case, x, jnp.asarray(wrong))
+        assert not check.trusted, check.message()
+        assert "Untrustworthy gradient" in check.message()
+
+
+def test_value_and_grad_check_raises_on_a_wrong_gradient(case, x, explicit, monkeypatch):
+    # The right gradient passes (the autodiff program of the `explicit` fixture, reused).
+    psi, grad = fj.value_and_grad(case, x, "autodiff", rtol=RTOL, atol=ATOL, check=True)
+    np.testing.assert_array_equal(np.asarray(grad), explicit[1])
+    # A method returning a wrong gradient (here: the compiled program's result with its sign
+    # flipped, standing in for a method that differentiated the discrete solution wrongly) raises.
+    import ffr_jax._api as api
+
+    compiled = api._value_and_grad_design
+    monkeypatch.setattr(api, "_value_and_grad_design", lambda *a: (lambda p, g: (p, -g))(*compiled(*a)))
+    with pytest.raises(ValueError, match="Untrustworthy gradient"):
+        fj.value_and_grad(case, x, "autodiff", rtol=RTOL, atol=ATOL, check=True)
+
+
+def test_quadrature_chunk_is_bounded_by_the_number_of_parameters():
+    # 181, 1,385 and 5,145 parameters: the slider-crank at 6, 20 and 40 modes.
+    assert quadrature_chunk(3, 181) == 241
+    assert quadrature_chunk(3, 1385) == 31
+    assert quadrature_chunk(3, 5145) == 8
+    assert quadrature_chunk(3, 10) == 256 and quadrature_chunk(3, 10**7) == 1
+    assert quadrature_chunk(3, 5145, chunk=64) == 64
