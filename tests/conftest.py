@@ -43,12 +43,16 @@ if _cache:
 # same case, `helpers.small_case`, which is cached per process.) The order after issues 12 and 13
 # (design subpackage, problem type): the older modules keep their measured ranking; test_problem and the
 # test_design_* modules are placed by their single-process times on the shared, loaded machine (only
-# the ranking is meant; benchmarks/RESULTS.md, "Test modules one at a time").
+# the ranking is meant; benchmarks/RESULTS.md, "Test modules one at a time"); the modules of issues 14-17
+# by their authors' loaded cold times.
 _SHARED_PROGRAMS = ("test_sensitivity", "test_hard_cases", "test_adjoint_quadrature", "test_cacheable")
-_LONGEST_FIRST = ("family", "test_notebooks", "test_problem", "test_design_map", "test_design_modes", "test_dynamics",
-                  "test_optimize", "test_design_invariant", "test_simulation_errors", "test_effects",
-                  "test_design_body_data", "test_design_geometry", "test_bad_input", "test_design_mesh",
-                  "test_design_filter", "test_design_elements", "test_notebooks_optimize", "test_bad_input_fuzz")
+_LONGEST_FIRST = ("family", "test_problem", "test_two_links", "test_notebooks", "test_design_map", "test_conditions",
+                  "test_design_modes", "test_dynamics", "test_optimize", "test_io", "test_design_invariant",
+                  "test_stiff_route", "test_mma", "test_solvers", "test_accelerations_derivative", "test_bad_input_fuzz", "test_simulation_errors", "test_effects",
+                  "test_link_four_bar", "test_constraints", "test_design_body_data", "test_design_geometry",
+                  "test_bad_input", "test_two_links_optimize", "test_design_mesh", "test_design_filter",
+                  "test_design_elements", "test_design_stacked", "test_small_linalg", "test_notebook_link",
+                  "test_notebooks_optimize")
 
 
 def _group(item) -> str:

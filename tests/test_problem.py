@@ -123,6 +123,7 @@ def test_rigid_adjoint_equals_finite_differences(rigid, rigid_gradients, objecti
         f"{objective}, d psi / d {parameter}: adjoint {adjoint:.10e}, central differences {fd:.10e}")
 
 
+@pytest.mark.slow  # two compiles of their own (backsolve, direct); the same methods run on cases in test_sensitivity
 def test_every_method_takes_a_problem(rigid, rigid_gradients):
     """Backsolve and the direct method on the sum objective, against the adjoint."""
     reference = _flat(rigid_gradients["sum"]["adjoint"][1])

@@ -57,8 +57,11 @@ def _method(name):
 
 # Autodiff and backsolve through Rodas5P compile reverse mode through the solver's linearisation
 # (about 4-5 minutes each on the loaded 2-core machine, against 3.6 for the adjoint): marked slow
-# to keep the default suite within its budget; the adjoint, the project's method, runs by default.
-@pytest.mark.parametrize("name", ["adjoint", pytest.param("autodiff", marks=pytest.mark.slow),
+# to keep the default suite within its budget. The adjoint's (about 90 s of compile on a quiet 2-core
+# machine) is slow too: the stiff route is not the default solver (issue 15 is open); the guard tests below
+# run by default.
+@pytest.mark.parametrize("name", [pytest.param("adjoint", marks=pytest.mark.slow),
+                                  pytest.param("autodiff", marks=pytest.mark.slow),
                                   pytest.param("backsolve", marks=pytest.mark.slow)])
 def test_stiff_route_gives_the_explicit_psi_and_gradient(case, x, explicit, name):
     psi, grad = fj.value_and_grad(case, x, _method(name), rtol=RTOL, atol=ATOL, solver=fj.Rodas5P())
