@@ -13,11 +13,13 @@ import pytest
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
-# XLA compilation dominates the suite's run time. JAX's persistent cache keeps compiled programs
-# between runs on one machine, but only those without host callbacks: every diffrax solve (its
-# `eqx.error_if` checks) is compiled afresh in each process, cache or not. FFR_JAX_TEST_CACHE=
-# (empty) turns the cache off.
-_cache = os.environ.get("FFR_JAX_TEST_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "ffr_jax", "xla"))
+# JAX's persistent compilation cache is OFF for the suite unless FFR_JAX_TEST_CACHE names a directory.
+# It keeps only programs without host callbacks (every diffrax solve, through its `eqx.error_if`
+# checks, is compiled afresh in each process, cache or not), so it saves little here, and a run of the
+# README command with the cache a first run had left (fresh clone, 25d7f18) lost a pytest-xdist worker
+# to a segfault in libgcc_s's unwinder and then hung. Until that is understood, each run compiles
+# everything itself: the same work on every machine, whatever cache it holds.
+_cache = os.environ.get("FFR_JAX_TEST_CACHE", "")
 # The CLI (run in-process by some tests) turns on its own persistent cache: point it at the same
 # directory, or keep it off when the tests run without a cache.
 if _cache:
