@@ -2,6 +2,10 @@
 
 import jax as _jax
 
+from ._xla_flags import avoid_batched_lapack_deadlock as _avoid_batched_lapack_deadlock
+
+# Before JAX's CPU backend starts: see `_xla_flags` (a deadlock of batched LAPACK kernels under vmap).
+_avoid_batched_lapack_deadlock()
 # float64 throughout: the one place the package sets it.
 _jax.config.update("jax_enable_x64", True)
 

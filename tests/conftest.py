@@ -7,8 +7,29 @@ and root conftest files load before that hook.
 
 import os
 
-import jax
 import pytest
+
+
+# XLA settings for the suite, set before JAX's backend starts. Compilation dominates the suite (each
+# diffrax solve and gradient is compiled once per structure and process), so the suite trades run time
+# for compile time: measured on tests/test_problem.py alone, one process, two such runs at once on
+# 2 cores: 246 s in the suite before -> 161 s without XLA's new fusion emitters -> 147 s with LLVM at
+# -O0 too (the rigid adjoint + autodiff setup 116 -> 79 -> 70 s; a compiled gradient then runs 2-3x
+# slower). The numbers the tests check do not depend on it beyond round-off: every tolerance is argued
+# from the accuracy of its check (tests/TOLERANCES.md), not from one compiler's last bits.
+# FFR_JAX_TEST_XLA_DEFAULTS=1 runs the suite with XLA's defaults instead (as users get them).
+# The package adds its own flag on import (ffr_jax/_xla_flags.py: a deadlock of batched LAPACK kernels
+# under vmap); it is set here too, since a test module could start the backend before importing ffr_jax.
+_DEADLOCK_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"  # = ffr_jax._xla_flags.DEADLOCK_FLAG
+if _DEADLOCK_FLAG.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_DEADLOCK_FLAG}".strip()
+if not os.environ.get("FFR_JAX_TEST_XLA_DEFAULTS"):
+    for _flag in ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0",
+                  "--xla_llvm_disable_expensive_passes=true"):
+        if _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+            os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
+
+import jax  # noqa: E402  (after XLA_FLAGS)
 
 
 jax.config.update("jax_enable_x64", True)

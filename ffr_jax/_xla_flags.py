@@ -1,0 +1,34 @@
+"""XLA settings the package needs before JAX starts its CPU backend.
+
+A deadlock of jaxlib's CPU runtime (jax/jaxlib 0.10.2): a batched LAPACK kernel (`cholesky`,
+`eigh`, ... under `jax.vmap`) splits its batch over XLA's intra-op thread pool and blocks one pool
+thread until the pieces are done. XLA's concurrency-optimised scheduler runs independent
+operations at the same time; when as many batched LAPACK kernels run at once as the pool has
+threads (two on a 2-core machine), every pool thread waits and none runs the pieces: the program
+hangs at 0 % CPU. In this package it happens whenever dense modal analyses are batched with
+independent branches, e.g. `jax.vmap` over designs of a difference quotient `f(x + h e) - f(x - h e)`
+(a test of the frequency constraint hung so). Reproducer: 80 x 80 Cholesky factors of a batch of 48,
+two independent ones per program, hung in 3 of 3 runs (and 3 of 3 other shapes and op mixes); with the
+scheduler off, 0 of 10 runs hung.
+
+Turning the scheduler off costs no measurable run time here (a rigid problem's adjoint gradient:
+0.12 s either way). The flag is added only when the user's `XLA_FLAGS` does not set it, and only
+takes effect if `ffr_jax` is imported before JAX's backend starts (before the first computation).
+"""
+
+import os
+
+
+DEADLOCK_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+
+
+def add_flag(flag: str) -> None:
+    """Append `flag` to `XLA_FLAGS` unless the user's `XLA_FLAGS` already sets that option."""
+    name = flag.split("=", 1)[0]
+    current = os.environ.get("XLA_FLAGS", "")
+    if name not in current:
+        os.environ["XLA_FLAGS"] = f"{current} {flag}".strip()
+
+
+def avoid_batched_lapack_deadlock() -> None:
+    add_flag(DEADLOCK_FLAG)
