@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The README's test command as a new user meets it (issue 11), then once more with the cache it left:
+# The README's test command as a new user meets it (issue 11), then on other settings (see below):
 # a clean clone of the committed HEAD, a new venv, HOME pointing at an empty directory (no JAX
 # compilation cache, no pip cache); the install, then the tests cold, then the tests warm (same
 # HOME, so JAX's persistent cache from the first run is there). Writes the section
@@ -19,29 +19,44 @@ tests=${cmd#*&& }
 echo "fresh clone of $head; install: $install; tests: $tests"
 start=$(date +%s); bash -c "$install" > "$root/install.log" 2>&1 || { tail -5 "$root/install.log"; exit 2; }
 install_s=$(( $(date +%s) - start ))
+# Three runs of the README's test command in the same fresh clone:
+#   cold:   as the README runs it (the suite keeps JAX's persistent cache off: tests/conftest.py);
+#   single: single-threaded XLA (each worker pinned to a CPU of its own: an intra-op pool of one thread) with the
+#           persistent cache ON and empty (FFR_JAX_TEST_CACHE), so this run fills it;
+#   warm:   default threading, the cache the single-threaded run left.
+cache="$HOME/jax-cache"
+run() {  # name, env assignments...
+  local name=$1; shift
+  local t0=$(date +%s)
+  env "$@" bash -c "$tests" > "$root/$name.log" 2>&1; local rc=$?
+  eval "${name}_rc=$rc; ${name}_s=$(( $(date +%s) - t0 )); ${name}_line=\"\$(tail -1 \"$root/$name.log\")\"; ${name}_load=\"$(cut -d' ' -f1-3 /proc/loadavg)\""
+}
 load0=$(cut -d' ' -f1-3 /proc/loadavg)
-start=$(date +%s); bash -c "$tests" > "$root/cold.log" 2>&1; cold_rc=$?; cold_s=$(( $(date +%s) - start ))
-load1=$(cut -d' ' -f1-3 /proc/loadavg)
-start=$(date +%s); bash -c "$tests" > "$root/warm.log" 2>&1; warm_rc=$?; warm_s=$(( $(date +%s) - start ))
-load2=$(cut -d' ' -f1-3 /proc/loadavg)
-cold_line=$(tail -1 "$root/cold.log"); warm_line=$(tail -1 "$root/warm.log")
-grep -E "^(FAILED|ERROR)" "$root/cold.log" "$root/warm.log" | head -20
-echo "cold: $cold_line (exit $cold_rc, ${cold_s} s); warm: $warm_line (exit $warm_rc, ${warm_s} s); install ${install_s} s"
+run cold
+run single FFR_JAX_TEST_CACHE="$cache" FFR_JAX_TEST_ONE_CORE_PER_WORKER=1
+run warm FFR_JAX_TEST_CACHE="$cache"
+grep -E "^(FAILED|ERROR)" "$root/cold.log" "$root/single.log" "$root/warm.log" | head -20
+for name in cold single warm; do eval "echo \"$name: \$${name}_line (exit \$${name}_rc, \$${name}_s s)\""; done
+echo "install ${install_s} s"
+mkdir -p "$top/benchmarks/results/suite_fresh"
+for name in cold single warm; do grep -E "^[0-9.]+s (call|setup)" "$root/$name.log" | head -30 > "$top/benchmarks/results/suite_fresh/$name-durations.txt"; done
 python3 - "$top/benchmarks" <<EOF
 import sys
 sys.path.insert(0, sys.argv[1])
 from _results import write_section
 body = """Command: \`benchmarks/suite_fresh.sh\` at commit $head: a clean clone, a new venv, \`HOME\` an empty
 directory (no JAX compilation cache), the README's install (\`$install\`, ${install_s} s), then the README's
-test command (\`$tests\`) twice: cold (empty cache) and warm (the cache the first run left).
-Machine: $(nproc) CPUs, load average before / between / after: $load0 / $load1 / $load2; default XLA threading,
-two pytest-xdist workers (pyproject \`addopts\`).
+test command (\`$tests\`) three times in that clone. Machine: $(nproc) CPUs, load average (1/5/15 min) before the
+first run $load0; two pytest-xdist workers (pyproject \`addopts\`). The suite's own XLA settings
+(tests/conftest.py: fusion emitters off, LLVM -O0, the package's scheduler flag) apply to every run.
+The 30 slowest setups and calls of each run: \`benchmarks/results/suite_fresh/<run>-durations.txt\`.
 
-| run | wall time [s] | result | exit code |
-|---|---:|---|---:|
-| cold cache | $cold_s | $cold_line | $cold_rc |
-| warm cache | $warm_s | $warm_line | $warm_rc |
+| run | settings | wall time [s] | result | exit code | load after |
+|---|---|---:|---|---:|---|
+| cold | as the README runs it: persistent cache off (the suite's default), default XLA threading | $cold_s | $cold_line | $cold_rc | $cold_load |
+| single | single-threaded XLA (\`FFR_JAX_TEST_ONE_CORE_PER_WORKER=1\`: each worker pinned to its own CPU, so XLA's intra-op pool has one thread), persistent cache ON and empty (\`FFR_JAX_TEST_CACHE\`): fills it | $single_s | $single_line | $single_rc | $single_load |
+| warm | default threading, persistent cache ON with what the single run left | $warm_s | $warm_line | $warm_rc | $warm_load |
 """
 write_section("Test suite on a fresh machine", body)
 EOF
-exit $(( cold_rc != 0 || warm_rc != 0 ))
+exit $(( cold_rc != 0 || single_rc != 0 || warm_rc != 0 ))

@@ -29,6 +29,15 @@ if not os.environ.get("FFR_JAX_TEST_XLA_DEFAULTS"):
         if _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
             os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
 
+# Single-threaded XLA: FFR_JAX_TEST_ONE_CORE_PER_WORKER=1 pins each pytest-xdist worker to one CPU of its
+# own before JAX starts, so XLA's intra-op thread pool (sized by the CPUs a process may use) has one
+# thread. (`XLA_FLAGS=intra_op_parallelism_threads=1` does not change that pool in jaxlib 0.10.2.)
+# Workers only: the controlling process must not pin itself, its workers would inherit it.
+_worker = os.environ.get("PYTEST_XDIST_WORKER")
+if os.environ.get("FFR_JAX_TEST_ONE_CORE_PER_WORKER") and _worker and hasattr(os, "sched_setaffinity"):
+    _cpus = sorted(os.sched_getaffinity(0))
+    os.sched_setaffinity(0, {_cpus[int(_worker.removeprefix("gw")) % len(_cpus)]})
+
 import jax  # noqa: E402  (after XLA_FLAGS)
 
 
