@@ -17,6 +17,7 @@ takes effect if `ffr_jax` is imported before JAX's backend starts (before the fi
 """
 
 import os
+import warnings
 
 
 DEADLOCK_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
@@ -30,5 +31,20 @@ def add_flag(flag: str) -> None:
         os.environ["XLA_FLAGS"] = f"{current} {flag}".strip()
 
 
+def _backend_started() -> bool:
+    from jax._src import xla_bridge  # private: whether a backend exists already (no public query)
+
+    return bool(getattr(xla_bridge, "_backends", {}))
+
+
 def avoid_batched_lapack_deadlock() -> None:
+    """Turn XLA's concurrency-optimised CPU scheduler off (see the module docstring)."""
+    name = DEADLOCK_FLAG.split("=", 1)[0]
+    if name in os.environ.get("XLA_FLAGS", ""):
+        return
     add_flag(DEADLOCK_FLAG)
+    if _backend_started():
+        warnings.warn(f"JAX's backend started before ffr_jax was imported, so {DEADLOCK_FLAG} (XLA_FLAGS) "
+                      "does not apply in this process: batched dense modal analyses under jax.vmap may hang "
+                      "(ffr_jax/_xla_flags.py). Import ffr_jax first, or set XLA_FLAGS before starting Python.",
+                      RuntimeWarning, stacklevel=3)

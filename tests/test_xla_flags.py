@@ -54,3 +54,11 @@ def test_a_setting_of_the_user_is_kept():
     assert result.stdout.split() == ["--xla_cpu_enable_concurrency_optimized_scheduler=true", "--xla_dump_to=/dev/null"]
     result = _run(program, "--xla_dump_to=/dev/null", timeout=120)
     assert result.stdout.split() == ["--xla_dump_to=/dev/null", "--xla_cpu_enable_concurrency_optimized_scheduler=false"]
+
+
+def test_importing_after_jax_started_warns_that_the_guard_is_not_in_effect():
+    result = _run("import jax.numpy as jnp; jnp.ones(2).sum()\nimport ffr_jax", None, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "JAX's backend started before ffr_jax was imported" in result.stderr
+    result = _run("import ffr_jax, jax.numpy as jnp; jnp.ones(2).sum()", None, timeout=120)
+    assert "backend started" not in result.stderr
