@@ -92,9 +92,14 @@ def _group(item) -> str:
     return "family" if module in _SHARED_PROGRAMS else module
 
 
-@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own hook reads the groups
+# A wrapper, so that this runs before every plain implementation, pytest-xdist's among them (it reads the
+# groups in its own `pytest_collection_modifyitems`). `tryfirst=True` was not enough: with pytest 9.2 /
+# pluggy 1.7 (what a fresh install gets) xdist's hook ran first, no test carried a group, and each
+# module's fixtures were built on both workers (the cold suite took 624 s instead of ~440 s).
+@pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config, items):
     rank = {name: k for k, name in enumerate(_LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(_group(item), len(rank)))  # stable: module order kept within a group
     for item in items:
         item.add_marker(pytest.mark.xdist_group(_group(item)))
+    return (yield)
