@@ -62,6 +62,7 @@ def main():
     parser.add_argument("--modes", type=int, default=20)
     parser.add_argument("--out", default=str(HERE / "results" / "gradient_guard.json"))
     parser.add_argument("--only", nargs="*", default=None, help="configs as method:solver:rtol, e.g. adjoint:rodas5p:1e-10")
+    parser.add_argument("--runs", type=int, default=3, help="timed runs per gradient (median), after one warm-up")
     args = parser.parse_args()
     case = ffr_jax.cases.slider_crank(12, 2, args.modes, 0.2)
     x = case.initial_design(0.5)
@@ -93,10 +94,10 @@ def main():
         start = time.perf_counter()
         jax.block_until_ready(fn(x))
         first = time.perf_counter() - start
-        (psi, grad), run_s = _timed(fn, x)
+        (psi, grad), run_s = _timed(fn, x, runs=args.runs)
         grads.append(np.asarray(grad))
         own_psi = psi_fn(rtol, solver)
-        _, forward_s = _timed(own_psi, x)
+        _, forward_s = _timed(own_psi, x, runs=args.runs)
         unit = grad / jnp.linalg.norm(grad)
         row = {"method": name, "solver": solver_name, "rtol": rtol, "psi": float(psi), "compile_s": first - run_s,
                "run_s": run_s, "forward_s": forward_s, "max_abs_grad": float(jnp.max(jnp.abs(grad))),
@@ -117,6 +118,10 @@ def main():
         row["load"] = os.getloadavg()
         rows.append(row)
         print(json.dumps(row), flush=True)
+        # Written after every row, so that a run stopped part-way keeps what it measured.
+        out = pathlib.Path(args.out)
+        out.parent.mkdir(exist_ok=True)
+        out.write_text(json.dumps({"modes": args.modes, "rows": rows, "complete": False}, indent=1))
     # Reference gradient: the central differences of psi at rtol 1e-12 (Dopri8) along each gradient's
     # own direction are in the rows; the gradients are also compared with each other here.
     for row, grad in zip(rows, grads):
@@ -125,7 +130,7 @@ def main():
             for other, g in zip(rows, grads)}
     out = pathlib.Path(args.out)
     out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps({"modes": args.modes, "rows": rows}, indent=1))
+    out.write_text(json.dumps({"modes": args.modes, "rows": rows, "complete": True}, indent=1))
 
 
 if __name__ == "__main__":
