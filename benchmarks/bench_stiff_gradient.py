@@ -8,6 +8,10 @@ right-hand side is exact), against today's adjoint (Dopri8 forward and backward)
 configuration: compile time, median run time, psi and gradient errors against a tight reference
 (autodiff through Dopri8 at rtol 1e-12, atol 1e-14: the explicit route, independent of the stiff
 one), forward/backward steps and the process's peak RSS. Each configuration runs in its own process.
+CAUTION: at many modes that reference is itself wrong — at 20 modes on the 12 x 2 case it is 3.2e-3
+(max norm) from the adjoint, backsolve and Rodas5P gradients, which agree with finite differences to
+~2e-8 (RESULTS.md, "Every method at 20 modes against finite differences"); its gradient errors above
+~10 modes measure the reference, not the row.
 
 Methods (`--methods`): `adjoint:dopri8`, `adjoint:rodas5p`, `autodiff:dopri8`, `autodiff:rodas5p`,
 `backsolve:rodas5p`; `--rtols` the forward tolerance (atol = 1e-2 rtol), the adjoint's backward
