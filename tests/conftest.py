@@ -92,10 +92,10 @@ def _group(item) -> str:
     return "family" if module in _SHARED_PROGRAMS else module
 
 
-# A wrapper, so that this runs before every plain implementation, pytest-xdist's among them (it reads the
-# groups in its own `pytest_collection_modifyitems`). `tryfirst=True` was not enough: with pytest 9.2 /
-# pluggy 1.7 (what a fresh install gets) xdist's hook ran first, no test carried a group, and each
-# module's fixtures were built on both workers (the cold suite took 624 s instead of ~440 s).
+# A wrapper runs before every plain implementation whatever the plugins' registration order, so the groups
+# are in place when pytest-xdist's own `pytest_collection_modifyitems` reads them. (With pytest 9.2 and
+# pytest-xdist 3.8 the groups are lost all the same: see the pin in pyproject.toml and
+# tests/test_suite_setup.py; the cold suite then took 624 s instead of ~450 s.)
 @pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config, items):
     rank = {name: k for k, name in enumerate(_LONGEST_FIRST)}
