@@ -12,7 +12,8 @@ the gradient came from (two forward solves). A gradient that is the derivative o
 solution whose step sequence is driven by the stability limit, rather than of the solution,
 fails it by orders of magnitude; its cost is reported as a fraction of the gradient's.
 
-Usage: `python benchmarks/probe_gradient_guard.py [--modes 20] [--out benchmarks/results/gradient_guard.json]`
+Usage: `python benchmarks/probe_gradient_guard.py [--modes 20] [--runs 3] [--only method:solver:rtol ...] [--out benchmarks/results/gradient_guard.json]`
+(each row is written to `--out` as it finishes)
 """
 
 import argparse
