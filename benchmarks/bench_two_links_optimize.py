@@ -57,6 +57,20 @@ def plot_two_links(case, x_phys: dict, path, title=""):
     fig.savefig(path, dpi=150)
 
 
+def summary_table(psi_uniform, psi_opt, volume, grey, wall, steps) -> list[str]:
+    """The RESULTS.md table of a two-links optimisation (also used by two_links_summary.py)."""
+    return [
+        "| quantity | value |",
+        "|---|---|",
+        f"| psi, uniform designs of the same volume per rod (rtol 1e-10) | {psi_uniform:.6e} |",
+        f"| psi, optimised physical designs (rtol 1e-10) | {psi_opt:.6e} |",
+        f"| **objective ratio optimised / uniform** | **{psi_opt / psi_uniform:.4f}** |",
+        f"| volume coupler / rocker | {volume['coupler']:.4f} / {volume['rocker']:.4f} |",
+        f"| grey share (0.1 < x_phys < 0.9) coupler / rocker | {100 * grey['coupler']:.1f} % / {100 * grey['rocker']:.1f} % |",
+        f"| wall time ({steps} steps, compile included) | {wall:.0f} s |",
+    ]
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--nx", type=int, default=40)
@@ -132,14 +146,7 @@ def main():
            f"one shared volume constraint V = {args.volume} (area fraction of both rods together)")
         + f", Adam (lr {args.lr}) on the adjoint gradient (rtol {args.rtol}, atol {args.atol}), {args.iters} steps.",
         "",
-        "| quantity | value |",
-        "|---|---|",
-        f"| psi, uniform designs of the same volume per rod (rtol 1e-10) | {psi_uniform:.6e} |",
-        f"| psi, optimised physical designs (rtol 1e-10) | {psi_opt:.6e} |",
-        f"| **objective ratio optimised / uniform** | **{psi_opt / psi_uniform:.4f}** |",
-        f"| volume coupler / rocker | {per_body_volume['coupler']:.4f} / {per_body_volume['rocker']:.4f} |",
-        f"| grey share (0.1 < x_phys < 0.9) coupler / rocker | {100 * grey['coupler']:.1f} % / {100 * grey['rocker']:.1f} % |",
-        f"| wall time ({args.iters} steps, compile included) | {wall:.0f} s |",
+        *summary_table(psi_uniform, psi_opt, per_body_volume, grey, wall, args.iters),
         "",
         f"Pictures: `{args.out}/two_links.png` (both optimised rods), `{args.out}/convergence.png`.",
         f"Machine: {machine()}; load before the run {', '.join(f'{v:.1f}' for v in load_before)} — the 2-core "

@@ -22,6 +22,7 @@ import ffr_jax as fj
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from _results import machine, write_section  # noqa: E402
+from bench_two_links_optimize import summary_table  # noqa: E402
 
 
 def main():
@@ -58,14 +59,7 @@ def main():
         f"adjoint gradient (rtol {s['rtol']}, atol {s['atol']}), a density filter per rod (radius {s['filter_radius']} "
         f"elements), {bound}; {psi.size} steps.",
         "",
-        "| quantity | value |",
-        "|---|---|",
-        f"| psi, uniform designs of the same volume per rod (rtol 1e-10) | {psi_uniform:.6e} |",
-        f"| psi, optimised physical designs (rtol 1e-10) | {psi_opt:.6e} |",
-        f"| **objective ratio optimised / uniform** | **{psi_opt / psi_uniform:.4f}** |",
-        f"| volume coupler / rocker | {volume['coupler']:.4f} / {volume['rocker']:.4f} |",
-        f"| grey share (0.1 < x_phys < 0.9) coupler / rocker | {100 * grey['coupler']:.1f} % / {100 * grey['rocker']:.1f} % |",
-        f"| wall time ({psi.size} steps, compile included) | {args.wall:.0f} s |",
+        *summary_table(psi_uniform, psi_opt, volume, grey, args.wall, psi.size),
         f"| psi at the first / last step (rtol {s['rtol']}) | {psi[0]:.4e} / {psi[-1]:.4e} |",
         "",
         f"Pictures: `{args.run}/design.png` (both optimised rods), `{args.run}/convergence.png`.",
