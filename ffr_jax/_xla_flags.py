@@ -23,12 +23,14 @@ import warnings
 DEADLOCK_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
 
 
-def add_flag(flag: str) -> None:
-    """Append `flag` to `XLA_FLAGS` unless the user's `XLA_FLAGS` already sets that option."""
+def add_flag(flag: str) -> bool:
+    """Append `flag` to `XLA_FLAGS` unless the user's `XLA_FLAGS` already sets that option; whether it did."""
     name = flag.split("=", 1)[0]
     current = os.environ.get("XLA_FLAGS", "")
-    if name not in current:
-        os.environ["XLA_FLAGS"] = f"{current} {flag}".strip()
+    if name in current:
+        return False
+    os.environ["XLA_FLAGS"] = f"{current} {flag}".strip()
+    return True
 
 
 def _backend_started() -> bool:
@@ -39,11 +41,7 @@ def _backend_started() -> bool:
 
 def avoid_batched_lapack_deadlock() -> None:
     """Turn XLA's concurrency-optimised CPU scheduler off (see the module docstring)."""
-    name = DEADLOCK_FLAG.split("=", 1)[0]
-    if name in os.environ.get("XLA_FLAGS", ""):
-        return
-    add_flag(DEADLOCK_FLAG)
-    if _backend_started():
+    if add_flag(DEADLOCK_FLAG) and _backend_started():
         warnings.warn(f"JAX's backend started before ffr_jax was imported, so {DEADLOCK_FLAG} (XLA_FLAGS) "
                       "does not apply in this process: batched dense modal analyses under jax.vmap may hang "
                       "(ffr_jax/_xla_flags.py). Import ffr_jax first, or set XLA_FLAGS before starting Python.",

@@ -20,14 +20,14 @@ import pytest
 # FFR_JAX_TEST_XLA_DEFAULTS=1 runs the suite with XLA's defaults instead (as users get them).
 # The package adds its own flag on import (ffr_jax/_xla_flags.py: a deadlock of batched LAPACK kernels
 # under vmap); it is set here too, since a test module could start the backend before importing ffr_jax.
-_DEADLOCK_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"  # = ffr_jax._xla_flags.DEADLOCK_FLAG
-if _DEADLOCK_FLAG.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_DEADLOCK_FLAG}".strip()
+# (ffr_jax._xla_flags.add_flag cannot be imported here: see the module docstring on the import hook.)
+_FLAGS = ["--xla_cpu_enable_concurrency_optimized_scheduler=false"]  # = ffr_jax._xla_flags.DEADLOCK_FLAG
 if not os.environ.get("FFR_JAX_TEST_XLA_DEFAULTS"):
-    for _flag in ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0",
-                  "--xla_llvm_disable_expensive_passes=true"):
-        if _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
-            os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
+    _FLAGS += ["--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0",
+               "--xla_llvm_disable_expensive_passes=true"]
+for _flag in _FLAGS:  # each only where the user's XLA_FLAGS does not set that option
+    if _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
 
 # Single-threaded XLA: FFR_JAX_TEST_ONE_CORE_PER_WORKER=1 pins each pytest-xdist worker to one CPU of its
 # own before JAX starts, so XLA's intra-op thread pool (sized by the CPUs a process may use) has one
