@@ -1,17 +1,13 @@
 """Gradient of the reference slider–crank with the stiff route versus Dopri8, at several mode counts (issue 15).
 
-Phase-1 prototype measurement: the paper's adjoint (`ffr_jax.Adjoint`, unchanged) with the
-Rosenbrock method Rodas5P for the forward and the backward solve (the adjoint ODE is linear in
-`(mu, w)`, so the solver's one linear solve per stage with the exact Jacobian of the backward
-right-hand side is exact), against today's adjoint (Dopri8 forward and backward) and autodiff
-(`jax.grad` through the solver, `RecursiveCheckpointAdjoint`) with either solver. For each
-configuration: compile time, median run time, psi and gradient errors against a tight reference
-(autodiff through Dopri8 at rtol 1e-12, atol 1e-14: the explicit route, independent of the stiff
-one), forward/backward steps and the process's peak RSS. Each configuration runs in its own process.
-CAUTION: at many modes that reference is itself wrong — at 20 modes on the 12 x 2 case it is 3.2e-3
-(max norm) from the adjoint, backsolve and Rodas5P gradients, which agree with finite differences to
-~2e-8 (RESULTS.md, "Every method at 20 modes against finite differences"); its gradient errors above
-~10 modes measure the reference, not the row.
+The paper's adjoint (`ffr_jax.Adjoint`) with the Rosenbrock method Rodas5P forward and, on the
+forward's accepted steps, backward (`ffr_jax/_sensitivity/_forward_grid.py`; `adjoint-adaptive:rodas5p`
+for diffrax's adaptive backward solve), against the adjoint with Dopri8 and autodiff / backsolve
+with either solver. For each configuration: compile time, median run time, psi and gradient errors
+against a tight reference (`--reference`, default autodiff through Rodas5P at rtol 1e-11, see
+`reference`), forward steps and time with the same solver, and the process's peak RSS (the
+reference is computed in a process of its own). Each configuration runs in its own process;
+rows are written as they finish.
 
 Methods (`--methods`): `adjoint:dopri8`, `adjoint:rodas5p`, `autodiff:dopri8`, `autodiff:rodas5p`,
 `backsolve:rodas5p`; `--rtols` the forward tolerance (atol = 1e-2 rtol), the adjoint's backward
@@ -22,7 +18,8 @@ Usage:
 flock /tmp/ffr_bench.lock python benchmarks/bench_stiff_gradient.py --modes 6 15 30
 python benchmarks/bench_stiff_gradient.py --modes 6 --methods adjoint:rodas5p --rtols 1e-6 --runs 1 --no-write
 ```
-Writes `benchmarks/results/stiff_gradient.json` and `.md`; references in `results/stiff_gradient_ref_<modes>.npz`.
+Writes `benchmarks/results/<out>.json` and `.md` (with the 30 / 6 modes ratios); references in
+`results/stiff_gradient_ref_<modes>_<reference>.npz`.
 """
 
 import argparse
@@ -46,11 +43,14 @@ def _method(name, rtol, backward_rtol, chunk, backward_atol=None):
     from ffr_jax._solver import Rodas5P
 
     kind, solver_name = name.split(":")
+    grid = None
+    if kind == "adjoint-adaptive":
+        kind, grid = "adjoint", "adaptive"
     solver = {"dopri8": diffrax.Dopri8(), "rodas5p": Rodas5P()}[solver_name]
     if kind == "adjoint":
         b = rtol if backward_rtol is None else backward_rtol
         a = b * 1e-2 if backward_atol is None else backward_atol
-        return ffr_jax.Adjoint(rtol=b, atol=a, solver=solver, chunk=chunk), solver
+        return ffr_jax.Adjoint(rtol=b, atol=a, solver=solver, chunk=chunk, grid=grid), solver
     if kind == "autodiff":
         return ffr_jax.Autodiff(), solver
     if kind == "backsolve":
@@ -60,8 +60,15 @@ def _method(name, rtol, backward_rtol, chunk, backward_atol=None):
     raise ValueError(name)
 
 
-def reference(case, x, path):
-    """`(psi, grad)` by autodiff through Dopri8 at rtol 1e-12 (cached in `path`)."""
+def reference(case, x, path, spec):
+    """`(psi, grad)` of the accuracy reference `spec` ("method:solver:rtol", cached in `path`).
+
+    Default `autodiff:rodas5p:1e-11`: the discrete derivative through the stiff solver at a tight
+    tolerance, a different route from the paper's adjoint (no backward ODE, no quadrature) and free
+    of the explicit solver's stability limit (autodiff through Dopri8 is not: its derivative was
+    3.2e-3 off at 20 modes even at rtol 1e-12, RESULTS.md). `adjoint:dopri8:1e-12` (adaptive
+    backward, atol 1e-16) is the explicit-route alternative, used to check the default at 6 modes.
+    """
     import numpy as np
 
     import ffr_jax
@@ -69,7 +76,11 @@ def reference(case, x, path):
     if path.exists():
         data = np.load(path)
         return float(data["psi"]), data["grad"]
-    psi, grad = ffr_jax.value_and_grad(case, x, "autodiff", rtol=1e-12, atol=1e-14, max_steps=1_000_000)
+    name, rtol = spec.rsplit(":", 1)
+    rtol = float(rtol)
+    method, solver = _method(name, rtol, rtol, None, 1e-16)
+    psi, grad = ffr_jax.value_and_grad(case, x, method, rtol=rtol, atol=rtol * 1e-2, solver=solver,
+                                       max_steps=1_000_000)
     np.savez(path, psi=float(psi), grad=np.asarray(grad))
     return float(psi), np.asarray(grad)
 
@@ -89,7 +100,11 @@ def worker(spec):
         case = ffr_jax.cases.slider_crank(mesh[0], mesh[1], spec["modes"], mesh[2])
         tag = f"{spec['modes']}_{mesh[0]}x{mesh[1]}_t{mesh[2]:g}"
     x = case.initial_design(0.5)
-    psi_ref, grad_ref = reference(case, x, RESULTS / f"stiff_gradient_ref_{tag}.npz")
+    ref_tag = spec["reference"].replace(":", "_")
+    start = time.perf_counter()
+    psi_ref, grad_ref = reference(case, x, RESULTS / f"stiff_gradient_ref_{tag}_{ref_tag}.npz", spec["reference"])
+    if spec.get("only_reference"):  # its own process, so that no row's peak memory includes it
+        return {**spec, "reference_s": time.perf_counter() - start, "psi": psi_ref}
     method, solver = _method(spec["method"], spec["rtol"], spec["backward_rtol"], spec["chunk"],
                              spec.get("backward_atol"))
     rtol = spec["rtol"]
@@ -129,7 +144,7 @@ def worker(spec):
         start = time.perf_counter()
         jax.block_until_ready(forward(x))
         fwd.append(time.perf_counter() - start)
-    out.update(forward_s=statistics.median(fwd), forward_steps=int(traj.num_steps))
+    out.update(forward_s=statistics.median(fwd), forward_steps=int(traj.num_accepted_steps))
     out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     out["load"] = os.getloadavg()
     return out
@@ -151,6 +166,16 @@ def markdown(data):
         lines.append(f"| {r['modes']} | {r['method']} | {r['rtol']:g}{bwd} | {r['compile_s']:.1f} | {r['run_s']:.3f} | "
                      f"{r['forward_s']:.3f} ({r['forward_steps']}) | {r['run_s'] / r['forward_s']:.2f} | "
                      f"{r['psi_rel_error']:.1e} | {r['grad_rel_error']:.1e} | {r['peak_rss_mb']:.0f} |")
+    done = {(r["modes"], r["method"], r["rtol"]): r for r in data["rows"] if "error" not in r}
+    ratios = []
+    for (modes, method, rtol), r in done.items():
+        low = done.get((6, method, rtol))
+        if modes == 30 and low is not None:
+            ratios.append(f"| {method} | {rtol:g} | {r['forward_s'] / low['forward_s']:.2f} | "
+                          f"{r['run_s'] / low['run_s']:.2f} |")
+    if ratios:
+        lines += ["", "| method:solver | rtol | forward 30 / 6 modes | gradient 30 / 6 modes |", "|---|---:|---:|---:|",
+                  *ratios]
     return "\n".join(lines) + "\n"
 
 
@@ -172,6 +197,8 @@ def main():
     parser.add_argument("--slow-s", type=float, default=60.0)
     parser.add_argument("--max-steps", type=int, default=200_000)
     parser.add_argument("--timeout", type=float, default=3600.0)
+    parser.add_argument("--reference", default="autodiff:rodas5p:1e-11",
+                        help="accuracy reference, method:solver:rtol (see `reference`)")
     parser.add_argument("--no-write", action="store_true")
     parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -182,11 +209,16 @@ def main():
     data = {"command": "python benchmarks/bench_stiff_gradient.py " + " ".join(sys.argv[1:]), "rows": [],
             "threads": "XLA_FLAGS=" + os.environ.get("XLA_FLAGS", "(default)")}
     for n_modes in args.modes:
+        spec = {"modes": n_modes, "reference": args.reference, "only_reference": True,
+                "mesh": None if args.mesh is None else [int(args.mesh[0]), int(args.mesh[1]), args.mesh[2]]}
+        proc = subprocess.run([sys.executable, __file__, "--worker", json.dumps(spec)], capture_output=True, text=True,
+                              env={**os.environ, "PYTHONPATH": str(HERE.parent)})
+        print(proc.stdout.strip().splitlines()[-1] if proc.returncode == 0 else proc.stderr[-2000:], flush=True)
         for method in args.methods:
             for rtol in args.rtols:
                 spec = {"modes": n_modes, "method": method, "rtol": rtol, "backward_rtol": args.backward_rtol,
                         "chunk": args.chunk, "backward_atol": args.backward_atol, "runs": args.runs, "slow_s": args.slow_s, "max_steps": args.max_steps,
-                        "save_dir": str(RESULTS / f"{args.out}_gradients"),
+                        "save_dir": str(RESULTS / f"{args.out}_gradients"), "reference": args.reference,
                         "mesh": None if args.mesh is None else [int(args.mesh[0]), int(args.mesh[1]), args.mesh[2]]}
                 try:
                     proc = subprocess.run([sys.executable, __file__, "--worker", json.dumps(spec)], capture_output=True,
@@ -199,14 +231,20 @@ def main():
                     row = {**spec, "error": f"timed out after {args.timeout:.0f} s"}
                 print(json.dumps(row), flush=True)
                 data["rows"].append(row)
+                if not args.no_write:  # after every row: a killed run keeps what it measured
+                    write(args.out, data)
+    text = write(args.out, data) if not args.no_write else markdown(data)
+    print(text)
+
+
+def write(out, data):
     import _results
 
     data["machine"] = _results.machine()
     text = markdown(data)
-    print(text)
-    if not args.no_write:
-        (RESULTS / f"{args.out}.json").write_text(json.dumps(data, indent=1))
-        (RESULTS / f"{args.out}.md").write_text(text)
+    (RESULTS / f"{out}.json").write_text(json.dumps(data, indent=1))
+    (RESULTS / f"{out}.md").write_text(text)
+    return text
 
 
 if __name__ == "__main__":

@@ -394,20 +394,43 @@ def _state_and_accelerations(model, t, y, z, scene):
 @_state_and_accelerations.def_jvp
 def _state_and_accelerations_jvp(primals, tangents):
     model, t, y, z, scene = primals
+    if all(leaf is None for leaf in jtu.tree_leaves(tangents[4], is_leaf=lambda x: x is None)):
+        # No scene tangent (a Jacobian with respect to the state, as a Rosenbrock step forms): the
+        # scene stays a constant of the linearisation. Materialised zero tangents of its body
+        # data would be carried through every product of the equations of motion, for each
+        # tangent: at 30 modes that made a Jacobian by `jax.jacfwd` four times as costly.
+        _, dt, dy, dz = _zeros_for_none(primals[:4], tangents[:4])
+        return _state_and_accelerations_tangents(model, t, y, z, scene, dt, dy, dz, None)
     _, dt, dy, dz, dscene = _zeros_for_none(primals, tangents)
+    return _state_and_accelerations_tangents(model, t, y, z, scene, dt, dy, dz, dscene)
+
+
+def _state_and_accelerations_tangents(model, t, y, z, scene, dt, dy, dz, dscene):
+    """Primal and tangent of `(y_r, z_r, zdot)`; `dscene=None`: the scene held fixed."""
     dyn, static = eqx.partition(scene, eqx.is_inexact_array)
-    ddyn, _ = eqx.partition(dscene, eqx.is_inexact_array)
+    if dscene is None:
+        def state(t_, y_, z_):
+            return model.state(t_, y_, z_, scene)
 
-    def state(t_, y_, z_, dyn_):
-        return model.state(t_, y_, z_, eqx.combine(dyn_, static))
+        def residual_at(zdot):
+            return lambda t_, a, b: model.residual(t_, a, b, zdot, scene)
 
-    (y_r, z_r), (dy_r, dz_r) = jax.jvp(state, (t, y, z, dyn), (dt, dy, dz, ddyn))
+        extra, d_extra = (), ()
+    else:
+        ddyn, _ = eqx.partition(dscene, eqx.is_inexact_array)
+
+        def state(t_, y_, z_, dyn_):
+            return model.state(t_, y_, z_, eqx.combine(dyn_, static))
+
+        def residual_at(zdot):
+            return lambda t_, a, b, d: model.residual(t_, a, b, zdot, eqx.combine(d, static))
+
+        extra, d_extra = (dyn,), (ddyn,)
+
+    (y_r, z_r), (dy_r, dz_r) = jax.jvp(state, (t, y, z, *extra), (dt, dy, dz, *d_extra))
     mbar, rhs = model.minimal_terms(t, y_r, z_r, scene)
     zdot = spd_solve(mbar, rhs)
-    d_residual = jax.jvp(
-        lambda t_, a, b, d: model.residual(t_, a, b, zdot, eqx.combine(d, static)),
-        (t, y_r, z_r, dyn), (dt, dy_r, dz_r, ddyn),
-    )[1]
+    d_residual = jax.jvp(residual_at(zdot), (t, y_r, z_r, *extra), (dt, dy_r, dz_r, *d_extra))[1]
     # The tangent solve must be linear in `d_residual` for reverse mode (transposition): `lu_solve`
     # is, the augmented elimination of `spd_solve` is not.
     return (y_r, z_r, zdot), (dy_r, dz_r, -lu_solve(lu_factor(mbar), d_residual))

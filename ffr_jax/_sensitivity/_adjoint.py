@@ -16,7 +16,9 @@ from .._checks import optional_integer, tolerances
 from .._problem import Problem
 from .._simulate import solve_minimal
 from .._small_linalg import lu_factor, lu_solve, matmul, spd_solve
+from .._solver._rosenbrock import AbstractRosenbrock
 from ._base import AbstractSensitivity, problem_gradient
+from ._forward_grid import ForwardGridSolution, backward_on_forward_grid
 
 
 class AdjointTerms(eqx.Module):
@@ -238,7 +240,7 @@ def gauss_legendre(order: int):
     return 0.5 * (nodes + 1.0), 0.5 * weights
 
 
-def _quadrature_on_steps(problem, params, forward, backward: diffrax.DenseInterpolation, order: int,
+def _quadrature_on_steps(problem, params, forward, backward: diffrax.DenseInterpolation | ForwardGridSolution, order: int,
                          chunk: int | None):
     """`int_{t0}^{t1} (R2 - mu^T S3 - nu^T T3) dt` (paper eq. 44) as a flat `(n_p,)` vector.
 
@@ -346,6 +348,7 @@ class Adjoint(AbstractSensitivity):
     chunk: int | None = None
     products: str = eqx.field(static=True, default="reverse")
     max_steps: int | None = None
+    grid: str | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         tolerances(self.rtol, self.atol, "Adjoint (the backward solve)")
@@ -359,8 +362,29 @@ class Adjoint(AbstractSensitivity):
                                        or self.chunk < 1):
             raise ValueError(f"Adjoint(chunk=...) must be a positive number of backward steps (or None: sized "
                              f"by the number of parameters), got {self.chunk!r}.")
+        if self.grid not in (None, "forward", "adaptive"):
+            raise ValueError(f"Adjoint(grid=...) must be None, 'forward' or 'adaptive', got {self.grid!r}.")
         if self.products not in ("reverse", "matrices"):
             raise ValueError(f"Adjoint(products=...) must be 'reverse' or 'matrices', got {self.products!r}.")
+
+    def backward_solver(self, forward_solver=None) -> diffrax.AbstractSolver:
+        """The solver of the backward solve: `solver`, else the forward one, else `Dopri8()`."""
+        if self.solver is not None:
+            return self.solver
+        return diffrax.Dopri8() if forward_solver is None else forward_solver
+
+    def on_forward_grid(self, backward_solver) -> bool:
+        """Whether the backward solve steps on the forward's accepted steps (see `grid`)."""
+        if self.grid == "adaptive":
+            return False
+        rosenbrock = isinstance(backward_solver, AbstractRosenbrock)
+        if self.grid == "forward" and not (rosenbrock and self.quadrature is not None):
+            raise ValueError(
+                "Adjoint(grid='forward') needs a Rosenbrock backward solver (e.g. ffr_jax.Rodas5P(); got "
+                f"{type(backward_solver).__name__}) and quadrature set (got {self.quadrature!r}): the backward "
+                "stages are solved with the exact Jacobian -J^T of the equations of motion, and the gradient "
+                "integral is not part of the backward ODE. Use grid='adaptive' for other solvers.")
+        return rosenbrock and self.quadrature is not None
 
     def backward_solve(self, problem: Problem, forward, *, solver=None, max_steps: int):
         """The backward solve of paper eq. 43 on the forward trajectory `forward` (dense).
@@ -376,20 +400,22 @@ class Adjoint(AbstractSensitivity):
         params = (problem.scene, problem.objective)
         f = problem.model.partition.n_independent
 
-        def field(t, state, args):
-            y, z = dense.evaluate(t)[:2]
+        def products(t, y, z, mu, w):
             if self.products == "matrices":
-                mu, w = state[0], state[1]
                 terms = adjoint_terms(problem, t, y, z, params)
                 nu = spd_solve(terms.mbar, w)
                 lam_y = matmul(terms.s1.T, mu) + matmul(terms.t1.T, nu) - terms.r1
                 lam_z = matmul(terms.s2.T, mu) + matmul(terms.t2.T, nu) - terms.rz
                 lam_p = adjoint_products(problem, t, y, z, params, mu, w, design=True)[3] if in_ode else None
             else:
-                lam_y, lam_z, _, lam_p = adjoint_products(problem, t, y, z, params, state[0], state[1], design=in_ode)
+                lam_y, lam_z, _, lam_p = adjoint_products(problem, t, y, z, params, mu, w, design=in_ode)
             if in_ode:
                 return lam_y, lam_z, jax.flatten_util.ravel_pytree(lam_p)[0]
             return lam_y, lam_z
+
+        def field(t, state, args):
+            y, z = dense.evaluate(t)[:2]
+            return products(t, y, z, *state[:2])
 
         t1 = jnp.asarray(problem.t1, forward.ys.dtype)
         if problem.objective.terminal is None:
@@ -400,10 +426,14 @@ class Adjoint(AbstractSensitivity):
         if in_ode:
             n_p = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[0].size
             state1 = (*state1, jnp.zeros(n_p))
-        if self.solver is not None:
-            solver = self.solver
-        elif solver is None:
-            solver = diffrax.Dopri8()
+        solver = self.backward_solver(solver)
+        if self.on_forward_grid(solver):
+            def accelerations(t, y, z):
+                return problem.model.state_and_accelerations(t, y, z, problem.scene)[2]
+
+            solution = backward_on_forward_grid(solver, dense.interpolation, products, accelerations, state1,
+                                                rtol=self.rtol, atol=self.atol)
+            return solution, terminal
         jumps = problem.jump_ts
         controller = diffrax.PIDController(rtol=self.rtol, atol=self.atol, jump_ts=jnp.asarray(jumps) if jumps else None)
         solution = diffrax.diffeqsolve(

@@ -125,6 +125,28 @@ def _solve_jvp(primals, tangents):
     return x, lu_solve(lu, d_rhs - d_matrix @ x)
 
 
+def rosenbrock_stages(tab: RosenbrockTableau, g, t0, h, u0, g0, g_t, matrix, lu):
+    """The `(s, n)` stages `k_i` of one Rosenbrock step (module docstring) for `g(t, u) = h f(t, u)`.
+
+    `g0 = g(t0, u0)`, `g_t = dg/dt(t0, u0)`, `matrix = I / gamma - dg/du(t0, u0)` and `lu` its
+    factors (see [`lu_factor`][ffr_jax._small_linalg.lu_factor]). Stage 1 reuses `g0`; stages 2..s
+    run in one scan, so `g` is traced (and compiled) twice rather than `s` times.
+    """
+    s, n, dtype = tab.stages, u0.shape[0], u0.dtype
+    a = jnp.asarray(tab.a, dtype)
+    coupling = jnp.asarray(tab.c_coupling, dtype)
+    ks = jnp.zeros((s, n), dtype).at[0].set(_solve(matrix, lu, g0 + (tab.d[0] * h) * g_t))
+
+    def stage(ks, coefficients):
+        i, a_i, coupling_i, c_i, d_i = coefficients
+        gi = g(t0 + c_i * h, u0 + a_i @ ks)
+        return ks.at[i].set(_solve(matrix, lu, gi + (d_i * h) * g_t + coupling_i @ ks)), None
+
+    ks, _ = jax.lax.scan(stage, ks, (jnp.arange(1, s), a[1:], coupling[1:], jnp.asarray(tab.c[1:], dtype),
+                                     jnp.asarray(tab.d[1:], dtype)))
+    return ks
+
+
 class RosenbrockInterpolation(diffrax.AbstractLocalInterpolation):
     """The continuous output of a Rodas method on one step (see [`RosenbrockTableau`][])."""
 
@@ -182,7 +204,6 @@ class AbstractRosenbrock(diffrax.AbstractAdaptiveSolver):
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del solver_state, made_jump
         tab = self.tableau
-        s = tab.stages
         u0, unravel = jax.flatten_util.ravel_pytree(y0)
         dtype = u0.dtype
         n = u0.shape[0]
@@ -200,19 +221,7 @@ class AbstractRosenbrock(diffrax.AbstractAdaptiveSolver):
         matrix = jnp.eye(n, dtype=dtype) / tab.gamma - jac
         lu = lu_factor(jax.lax.stop_gradient(matrix))
 
-        # Stage 1 at (t0, y0) reuses the linearisation's primal; stages 2..s run in one scan, so
-        # the vector field is traced (and compiled) twice rather than s times.
-        a = jnp.asarray(tab.a, dtype)
-        coupling = jnp.asarray(tab.c_coupling, dtype)
-        ks = jnp.zeros((s, n), dtype).at[0].set(_solve(matrix, lu, g0 + (tab.d[0] * h) * g_t))
-
-        def stage(ks, coefficients):
-            i, a_i, coupling_i, c_i, d_i = coefficients
-            gi = g(t0 + c_i * h, u0 + a_i @ ks)
-            return ks.at[i].set(_solve(matrix, lu, gi + (d_i * h) * g_t + coupling_i @ ks)), None
-
-        ks, _ = jax.lax.scan(stage, ks, (jnp.arange(1, s), a[1:], coupling[1:], jnp.asarray(tab.c[1:], dtype),
-                                         jnp.asarray(tab.d[1:], dtype)))
+        ks = rosenbrock_stages(tab, g, t0, h, u0, g0, g_t, matrix, lu)
         u1 = u0 + jnp.asarray(tab.b, dtype) @ ks
         err = jnp.asarray(tab.b_error, dtype) @ ks
         dense = jnp.asarray(tab.dense, dtype) @ ks  # (r, n)
