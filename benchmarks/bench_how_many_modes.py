@@ -32,11 +32,11 @@ sys.path.insert(0, str(HERE))
 from _results import machine, write_section  # noqa: E402
 
 
-def row_for(nx, ny, t1, n_modes, rtol):
+def row_for(nx, ny, t1, n_modes, rtol, method):
     case = fj.cases.slider_crank(nx, ny, n_modes, t1)
     x = jax.numpy.asarray(np.full(case.n_design, 0.5))
     solver = fj.Rodas5P()
-    gradient = eqx.filter_jit(lambda x: fj.value_and_grad(case, x, "autodiff", rtol=rtol, atol=rtol * 1e-2, solver=solver))
+    gradient = eqx.filter_jit(lambda x: fj.value_and_grad(case, x, method, rtol=rtol, atol=rtol * 1e-2, solver=solver))
     forward = eqx.filter_jit(lambda x: fj.objective(case, x, rtol=rtol, atol=rtol * 1e-2, solver=solver))
     start = time.perf_counter()
     jax.block_until_ready(gradient(x))
@@ -58,6 +58,10 @@ def main():
     parser.add_argument("--modes", nargs="+", type=int, default=[2, 4, 6, 8, 10, 15, 20, 30])
     parser.add_argument("--reference", type=int, default=40)
     parser.add_argument("--rtol", type=float, default=1e-10)
+    parser.add_argument("--method", default="autodiff",
+                        help="gradient method through Rodas5P: autodiff (the 12 x 2 study) or adjoint (the paper's, "
+                             "backward on the forward's steps; backward tolerances rtol 1e-8 / atol 1e-10)")
+    parser.add_argument("--section", default="How many modes", help="title of the RESULTS.md section")
     parser.add_argument("--out", default="how_many_modes")
     parser.add_argument("--no-write", action="store_true", help="do not write the RESULTS.md section (smoke runs)")
     args = parser.parse_args()
@@ -66,7 +70,7 @@ def main():
     path.parent.mkdir(exist_ok=True)
     rows = []
     for n in [args.reference, *args.modes]:  # the reference first: every later row is compared as it comes
-        row = row_for(nx, ny, t1, n, args.rtol)
+        row = row_for(nx, ny, t1, n, args.rtol, args.method)
         if rows:
             ref = rows[0]
             g, g_ref = np.asarray(row["grad"]), np.asarray(ref["grad"])
@@ -92,7 +96,7 @@ def main():
     ax2.plot(modes, [r["run_s"] for r in body_rows], "o-", label="gradient run")
     ax2.plot(modes, [r["forward_s"] for r in body_rows], "s-", label="forward run")
     ax2.set_xlabel("retained modes"), ax2.set_ylabel("seconds (after compilation)"), ax2.legend()
-    fig.suptitle(f"slider_crank({nx}, {ny}, N, {t1:g}), x = 0.5, autodiff through Rodas5P, rtol {args.rtol:g}")
+    fig.suptitle(f"slider_crank({nx}, {ny}, N, {t1:g}), x = 0.5, {args.method} through Rodas5P, rtol {args.rtol:g}")
     fig.tight_layout()
     fig.savefig(HERE / "results" / f"{args.out}.png", dpi=110)
 
@@ -101,10 +105,11 @@ def main():
     ref = rows[0]
     body = "\n".join([
         f"Command: `PYTHONPATH=$PWD flock /tmp/ffr_bench.lock python benchmarks/bench_how_many_modes.py --mesh {nx} {ny} {t1:g} "
-        f"--modes {' '.join(map(str, args.modes))} --reference {args.reference}`. Raw rows: `benchmarks/results/{args.out}.json`; "
+        f"--modes {' '.join(map(str, args.modes))} --reference {args.reference} --method {args.method} --rtol {args.rtol:g} "
+        f"--out {args.out} --section '{args.section}'`. Raw rows: `benchmarks/results/{args.out}.json`; "
         f"figure `benchmarks/results/{args.out}.png`.",
         "",
-        f"`fj.cases.slider_crank({nx}, {ny}, N, {t1:g})` at x = 0.5; psi and gradient by autodiff through `fj.Rodas5P()` at rtol "
+        f"`fj.cases.slider_crank({nx}, {ny}, N, {t1:g})` at x = 0.5; psi and gradient by {args.method} through `fj.Rodas5P()` at rtol "
         f"{args.rtol:g}; errors relative to N = {args.reference} (psi {ref['psi']:.10e}, highest retained frequency "
         f"{ref['highest_hz']:.0f} Hz, gradient run {ref['run_s']:.2f} s, compile {ref['compile_s']:.1f} s). Single samples.",
         "",
@@ -115,7 +120,7 @@ def main():
         f"Machine: {machine()}.",
     ])
     if not args.no_write:
-        write_section("How many modes", body)
+        write_section(args.section, body)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ One small slider-crank (10 x 2 mesh, 3 modes, t1 = 0.2 s) and one design; every 
 compiled once in a module fixture.
 """
 
+import diffrax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -56,11 +57,9 @@ def _method(name):
 
 
 # Autodiff and backsolve through Rodas5P compile reverse mode through the solver's linearisation
-# (about 4-5 minutes each on the loaded 2-core machine, against 3.6 for the adjoint): marked slow
-# to keep the default suite within its budget. The adjoint's (about 90 s of compile on a quiet 2-core
-# machine) is slow too: the stiff route is not the default solver (issue 15 is open); the guard tests below
-# run by default.
-@pytest.mark.parametrize("name", [pytest.param("adjoint", marks=pytest.mark.slow),
+# (about 4-5 minutes each on the loaded 2-core machine): marked slow to keep the default suite
+# within its budget. The adjoint (backward on the forward's steps) compiles in about 30 s and runs by default.
+@pytest.mark.parametrize("name", ["adjoint",
                                   pytest.param("autodiff", marks=pytest.mark.slow),
                                   pytest.param("backsolve", marks=pytest.mark.slow)])
 def test_stiff_route_gives_the_explicit_psi_and_gradient(case, x, explicit, name):
@@ -68,6 +67,45 @@ def test_stiff_route_gives_the_explicit_psi_and_gradient(case, x, explicit, name
     psi_ref, grad_ref = explicit
     assert abs(float(psi) - psi_ref) <= PSI_AGREE * abs(psi_ref), f"{name}: psi {float(psi)} vs {psi_ref}"
     assert_close_relative(grad, grad_ref, GRADIENT_AGREE[name], f"{name} with Rodas5P vs autodiff with Dopri8")
+
+
+def test_backward_jacobian_is_minus_the_transposed_jacobian_of_the_equations_of_motion(case, x):
+    # The identity the backward solve on the forward grid rests on (ffr_jax/_sensitivity/_forward_grid.py):
+    # the Jacobian of the adjoint right-hand side (paper eq. 43, in (mu, w = Mbar nu)) with respect to
+    # (mu, w) is -J^T, J = d(y', z')/d(y, z) of the minimal equations of motion. Both sides are exact
+    # derivatives by automatic differentiation taken in different orders (reverse pass of the products,
+    # forward mode through the accelerations); they differ by rounding in the Mbar and C_d solves
+    # (condition numbers ~1e4 here: ~1e-12 of the largest entry). 1e-10 allows a hundredfold.
+    # A sign or transpose error, or a missing dependent-coordinate term, is O(1).
+    import jax
+
+    from ffr_jax._sensitivity._adjoint import adjoint_products
+
+    problem = case.problem_for(case.check(x))
+    params = (problem.scene, problem.objective)
+    model, f = problem.model, problem.model.partition.n_independent
+    traj = fj.simulate(problem, rtol=1e-8, atol=1e-10, ts=jnp.array([0.13]))
+    t, y, z = jnp.asarray(0.13), traj.ys[0], traj.zs[0]
+
+    def rhs(lam):
+        return jnp.concatenate(adjoint_products(problem, t, y, z, params, lam[:f], lam[f:], design=False)[:2])
+
+    backward = jax.jacfwd(rhs)(jnp.zeros(2 * f))
+    a_y, a_z = jax.jacfwd(lambda y, z: model.state_and_accelerations(t, y, z, problem.scene)[2], argnums=(0, 1))(y, z)
+    forward = jnp.block([[jnp.zeros((f, f)), jnp.eye(f)], [a_y, a_z]])
+    assert_close_relative(backward, -forward.T, 1e-10, "Jacobian of the adjoint right-hand side vs -J^T")
+
+
+def test_grid_options_are_checked():
+    with pytest.raises(ValueError, match="grid"):
+        fj.Adjoint(grid="fixed")
+    with pytest.raises(ValueError, match="Rosenbrock backward solver"):
+        fj.Adjoint(grid="forward").on_forward_grid(diffrax.Dopri8())
+    with pytest.raises(ValueError, match="quadrature"):
+        fj.Adjoint(grid="forward", quadrature=None).on_forward_grid(fj.Rodas5P())
+    assert fj.Adjoint().on_forward_grid(fj.Rodas5P())
+    assert not fj.Adjoint(grid="adaptive").on_forward_grid(fj.Rodas5P())
+    assert not fj.Adjoint(quadrature=None).on_forward_grid(fj.Rodas5P())
 
 
 def test_gradient_check_accepts_the_gradient_and_rejects_wrong_ones(case, x, explicit):

@@ -319,10 +319,16 @@ class Adjoint(AbstractSensitivity):
     - `rtol`, `atol`: tolerances of the backward solve (the paper's 1e-8 / 1e-10 by default).
     - `solver`: the backward solver (default: the forward solver where one is given, else
       `Dopri8()`: at the paper's tolerances it takes a quarter of the steps of `Tsit5()` on the
-      reference case, and its 7th-order dense output feeds the quadrature). `ffr_jax.Rodas5P()`
-      (the stiff route) works too: the backward ODE is linear in `(mu, w)`, so each of its
-      linearly implicit stages is solved exactly with the Jacobian it forms (checked on small
-      cases; at 20 modes it and autodiff through Rodas5P differed from Dopri8 by 2e-3, benchmarks/RESULTS.md).
+      reference case, and its 7th-order dense output feeds the quadrature). With a Rosenbrock
+      method (`ffr_jax.Rodas5P()`, the stiff route) the backward ODE, linear in `(mu, w)`, has its
+      stages solved exactly with the Jacobian `-J^T` of the equations of motion (see `grid`).
+    - `grid`: where the backward solve steps. `None` (default): on the forward's accepted steps
+      when the backward solver is a Rosenbrock method and `quadrature` is set
+      (`ffr_jax/_sensitivity/_forward_grid.py`: no step control, no rejected steps, the Jacobian
+      by forward mode through the equations of motion; on the reference case 0.65 s backward
+      against a 0.27 s forward at 6 modes), else diffrax's adaptive solve; `"forward"` insists on
+      the former, `"adaptive"` on the latter (which also resolves the fast modes' free oscillations
+      of the adjoint, several times the cost).
     - `quadrature`: Gauss–Legendre nodes per backward step (default 3: exact for polynomials of
       degree 5 on each step), or `None`.
     - `chunk`: backward steps per vectorised quadrature batch (default `None`: sized by the
