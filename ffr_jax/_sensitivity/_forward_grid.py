@@ -14,9 +14,9 @@ linear in the Jacobian of the right-hand side:
 - the steps can be the forward solve's accepted steps, backward: the backward ODE has the
   eigenvalues of the forward one, and on each forward step the forward state is one polynomial
   (the step's dense output), so the backward right-hand side is smooth inside every step. An
-  adaptive backward solve instead meets a kink of the forward dense output at every forward step
-  boundary (an order-4 interpolant: jumps in its third derivative), which its error control
-  resolves with many small steps (issue 15: about 700 forward solves' worth of work at 6 modes).
+  adaptive backward solve took 746 steps where the forward took 76 (10 x 2 case, 3 modes, rtol
+  1e-8): it resolves the fast modes' free oscillations of the adjoint (below) and meets a kink of
+  the forward dense output at every forward step boundary.
 
 The price: the backward steps are not controlled by the backward tolerances. The backward solution
 has free oscillations of the fast modes (excited where the adjoint starts from zero at `t1` against a
