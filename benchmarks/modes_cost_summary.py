@@ -37,6 +37,25 @@ def gradient_file(row):
     return RESULTS / f"{row['run_name']}_gradients" / name
 
 
+def figure(done, name, modes_list):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(modes_list), figsize=(5.5 * len(modes_list), 4.2), layout="constrained")
+    for ax, modes in zip(np.atleast_1d(axes), modes_list):
+        methods = sorted({m for (n, m, _) in done if n == modes})
+        for method in methods:
+            pts = sorted((r["run_s"], r["grad_error_vs_reference"], rtol) for (n, m, rtol), r in done.items()
+                         if n == modes and m == method)
+            ax.loglog([p[0] for p in pts], [max(p[1], 1e-14) for p in pts], "o-", label=method)
+            for run, err, rtol in pts:
+                ax.annotate(f"{rtol:g}", (run, max(err, 1e-14)), fontsize=7, textcoords="offset points", xytext=(3, 3))
+        ax.set_title(f"reference case, {modes} modes"), ax.set_xlabel("gradient run time [s]")
+        ax.set_ylabel("gradient error (max norm, relative)"), ax.legend(fontsize=8)
+    fig.savefig(RESULTS / f"{name}.png", dpi=110)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", nargs="+", required=True)
@@ -44,6 +63,9 @@ def main():
     parser.add_argument("--reference-note", default="", help="what the references are (printed above the table)")
     parser.add_argument("--section", default="Cost against retained modes on the reference case")
     parser.add_argument("--intro", default="", help="a paragraph for the top of the section")
+    parser.add_argument("--figure", default=None, help="write a work-precision figure (gradient error vs run time, "
+                        "one panel per mode count in --figure-modes) to results/<figure>.png")
+    parser.add_argument("--figure-modes", type=int, nargs="+", default=[6, 30])
     parser.add_argument("--no-write", action="store_true")
     args = parser.parse_args()
     refs = {}
@@ -68,6 +90,7 @@ def main():
             psi_err = abs(float(saved["psi"]) - psi_ref) / abs(psi_ref)
             grad_err = float(np.max(np.abs(saved["grad"] - grad_ref)) / np.max(np.abs(grad_ref)))
         done[(r["modes"], r["method"], r["rtol"])] = r
+        r["grad_error_vs_reference"] = grad_err
         lines.append(f"| {r['modes']} | {r['method']} | {r['rtol']:g} | {r['compile_s']:.1f} | {r['run_s']:.3f} | "
                      f"{r['forward_s']:.3f} ({r['forward_steps']}) | {r['run_s'] / r['forward_s']:.2f} | "
                      f"{psi_err:.1e} | {grad_err:.1e} | {r['peak_rss_mb']:.0f} | {r['load'][0]:.2f} |")
@@ -77,6 +100,10 @@ def main():
         if modes == 30 and low is not None:
             ratios.append(f"| {method} | {rtol:g} | {r['forward_s'] / low['forward_s']:.2f} | "
                           f"{r['run_s'] / low['run_s']:.2f} |")
+    if args.figure:
+        figure(done, args.figure, args.figure_modes)
+        ratios += ["", f"Work–precision figure: `benchmarks/results/{args.figure}.png` (gradient error against run time "
+                       f"after compilation, {', '.join(map(str, args.figure_modes))} modes)."]
     commands = sorted({f"`{r['command']}`" for r in rows})
     ref_lines = [f"- {m} modes: `{p}`" for m, (_, _, p) in sorted(refs.items())]
     body = "\n".join([

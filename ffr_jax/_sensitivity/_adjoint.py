@@ -325,8 +325,8 @@ class Adjoint(AbstractSensitivity):
     - `grid`: where the backward solve steps. `None` (default): on the forward's accepted steps
       when the backward solver is a Rosenbrock method and `quadrature` is set
       (`ffr_jax/_sensitivity/_forward_grid.py`: no step control, no rejected steps, the Jacobian
-      by forward mode through the equations of motion; on the reference case 0.65 s backward
-      against a 0.27 s forward at 6 modes), else diffrax's adaptive solve; `"forward"` insists on
+      by forward mode through the equations of motion; on the reference case at 6 modes and
+      rtol 1e-8 0.96 s backward against a 0.29 s forward, benchmarks/profile_adjoint_split.py), else diffrax's adaptive solve; `"forward"` insists on
       the former, `"adaptive"` on the latter (which also resolves the fast modes' free oscillations
       of the adjoint, several times the cost).
     - `quadrature`: Gauss–Legendre nodes per backward step (default 3: exact for polynomials of
