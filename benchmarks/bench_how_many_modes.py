@@ -63,11 +63,21 @@ def main():
                              "backward on the forward's steps; backward tolerances rtol 1e-8 / atol 1e-10)")
     parser.add_argument("--section", default="How many modes", help="title of the RESULTS.md section")
     parser.add_argument("--out", default="how_many_modes")
+    parser.add_argument("--from-json", action="store_true",
+                        help="no computation: figure and section from results/<out>.json (e.g. after replacing a row)")
     parser.add_argument("--no-write", action="store_true", help="do not write the RESULTS.md section (smoke runs)")
     args = parser.parse_args()
     nx, ny, t1 = int(args.mesh[0]), int(args.mesh[1]), args.mesh[2]
     path = HERE / "results" / f"{args.out}.json"
     path.parent.mkdir(exist_ok=True)
+    if args.from_json:  # re-write the figure and the section from the saved rows
+        rows = json.loads(path.read_text())["rows"]
+    else:
+        rows = measure(args, nx, ny, t1, path)
+    report(args, rows, nx, ny, t1)
+
+
+def measure(args, nx, ny, t1, path):
     rows = []
     for n in [args.reference, *args.modes]:  # the reference first: every later row is compared as it comes
         row = row_for(nx, ny, t1, n, args.rtol, args.method)
@@ -83,6 +93,10 @@ def main():
     path.write_text(json.dumps(dict(mesh=[nx, ny, t1], rtol=args.rtol, reference=args.reference, rows=rows,
                                     complete=True)))
 
+    return rows
+
+
+def report(args, rows, nx, ny, t1):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
