@@ -7,8 +7,10 @@ names), recomputes the psi and gradient errors against `--reference MODES=PATH.n
 `grad`), and writes the RESULTS.md section `--section`: one table of every row, one of the 30 / 6 modes
 ratios of forward and gradient run time per method and tolerance.
 
-Usage: `python benchmarks/modes_cost_summary.py --runs modes_cost_wp modes_cost_mid modes_cost_dopri8
---reference 6=benchmarks/results/adjoint_dopri8_1e-12_6.npz ...`
+Usage (the command of the RESULTS section is printed in it): `python benchmarks/modes_cost_summary.py --runs
+modes_cost_wp modes_cost_mid modes_cost_dopri8 modes_cost_backsolve --reference
+6=benchmarks/results/stiff_gradient_ref_6_adjoint_dopri8_1e-12.npz 30=... --figure modes_cost_work_precision
+--section "Cost against retained modes on the reference case (issue 15)" --intro "..."`
 """
 
 import argparse

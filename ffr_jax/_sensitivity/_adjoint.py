@@ -339,7 +339,7 @@ class Adjoint(AbstractSensitivity):
       from `jax.jacfwd`, [`adjoint_terms`][], multiplied out; the same numbers, about 6x the cost
       per evaluation on the reference case). The design term is one VJP in both.
     - `max_steps`: step budget of the backward solve, whose dense output holds that many steps
-      (default: the forward budget).
+      (default: the forward budget; on the forward grid the backward solve takes the forward's steps).
 
     !!! cite "Reference"
         Held, Knüfer, Seifried (2017). Structural sensitivity analysis of flexible multibody
