@@ -25,6 +25,20 @@ def machine() -> str:
             f"load average {load} (1/5/15 min)")
 
 
+def timed(fn, *args, runs: int = 3):
+    """`(median run time [s], output)` of `fn(*args)` over `runs` calls after one warm-up call (compilation)."""
+    import statistics
+    import time
+
+    jax.block_until_ready(fn(*args))
+    samples = []
+    for _ in range(runs):
+        start = time.perf_counter()
+        out = jax.block_until_ready(fn(*args))
+        samples.append(time.perf_counter() - start)
+    return statistics.median(samples), out
+
+
 def write_section(title: str, body: str) -> None:
     """Replace (or append) the section `## title` of RESULTS.md with `body`."""
     text = RESULTS.read_text() if RESULTS.exists() else HEADER

@@ -21,7 +21,7 @@ import json
 import os
 import resource
 import pathlib
-import statistics
+import sys
 import time
 
 import equinox as eqx
@@ -33,6 +33,8 @@ import ffr_jax
 from ffr_jax._solver import Rodas5P
 
 HERE = pathlib.Path(__file__).parent
+sys.path.insert(0, str(HERE))
+from _results import timed  # noqa: E402
 
 
 def directional_check(psi_fn, x, grad, direction, step):
@@ -46,16 +48,6 @@ def directional_check(psi_fn, x, grad, direction, step):
     fd = float((plus - minus) / (2 * step))
     gd = float(jnp.dot(grad, direction))
     return gd, fd, abs(gd - fd) / max(abs(gd), abs(fd), 1e-300)
-
-
-def _timed(fn, *args, runs=3):
-    jax.block_until_ready(fn(*args))
-    samples = []
-    for _ in range(runs):
-        start = time.perf_counter()
-        out = jax.block_until_ready(fn(*args))
-        samples.append(time.perf_counter() - start)
-    return out, statistics.median(samples)
 
 
 def main():
@@ -95,10 +87,10 @@ def main():
         start = time.perf_counter()
         jax.block_until_ready(fn(x))
         first = time.perf_counter() - start
-        (psi, grad), run_s = _timed(fn, x, runs=args.runs)
+        run_s, (psi, grad) = timed(fn, x, runs=args.runs)
         grads.append(np.asarray(grad))
         own_psi = psi_fn(rtol, solver)
-        _, forward_s = _timed(own_psi, x, runs=args.runs)
+        forward_s, _ = timed(own_psi, x, runs=args.runs)
         unit = grad / jnp.linalg.norm(grad)
         row = {"method": name, "solver": solver_name, "rtol": rtol, "psi": float(psi), "compile_s": first - run_s,
                "run_s": run_s, "forward_s": forward_s, "max_abs_grad": float(jnp.max(jnp.abs(grad))),

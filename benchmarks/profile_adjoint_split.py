@@ -13,8 +13,8 @@ Usage: `PYTHONPATH=$PWD flock /tmp/ffr_bench.lock python benchmarks/profile_adjo
 """
 
 import argparse
-import statistics
-import time
+import pathlib
+import sys
 
 import equinox as eqx
 import jax
@@ -24,15 +24,8 @@ import ffr_jax as fj
 from ffr_jax._sensitivity._adjoint import _quadrature_on_steps
 from ffr_jax._simulate import solve_minimal
 
-
-def timed(fn, *args, runs=5):
-    jax.block_until_ready(fn(*args))
-    samples = []
-    for _ in range(runs):
-        start = time.perf_counter()
-        out = jax.block_until_ready(fn(*args))
-        samples.append(time.perf_counter() - start)
-    return statistics.median(samples), out
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+from _results import timed  # noqa: E402
 
 
 def split(n_modes, rtol):
@@ -42,10 +35,10 @@ def split(n_modes, rtol):
     method = fj.Adjoint(rtol=rtol, atol=atol)
     solver = fj.Rodas5P()
     scene_fn = eqx.filter_jit(case.scene)
-    t_scene, scene = timed(scene_fn, x)
+    t_scene, scene = timed(scene_fn, x, runs=5)
     pullback = eqx.filter_jit(lambda x, g: eqx.filter_vjp(case.scene, x)[1](g))
     cotangent = jax.tree_util.tree_map(jnp.ones_like, eqx.filter(scene, eqx.is_inexact_array))
-    t_vjp, _ = timed(pullback, x, cotangent)
+    t_vjp, _ = timed(pullback, x, cotangent, runs=5)
     problem = case.problem_for(case.check(x))
     params = (problem.scene, problem.objective)
 
@@ -63,13 +56,13 @@ def split(n_modes, rtol):
     def quadrature(problem, fw, bw):
         return _quadrature_on_steps(problem, params, fw.solution, bw, method.quadrature, None)
 
-    t_fwd, fw = timed(forward, problem)
-    t_bwd, bw = timed(backward, problem, fw)
-    t_quad, _ = timed(quadrature, problem, fw, bw)
+    t_fwd, fw = timed(forward, problem, runs=5)
+    t_bwd, bw = timed(backward, problem, fw, runs=5)
+    t_quad, _ = timed(quadrature, problem, fw, bw, runs=5)
     whole = eqx.filter_jit(lambda x: fj.value_and_grad(case, x, method, solver=solver, rtol=rtol, atol=atol))
     t_whole, _ = timed(whole, x, runs=3)
     sim = eqx.filter_jit(lambda x: fj.simulate(case, x, solver=solver, rtol=rtol, atol=atol, max_steps=200_000))
-    t_sim, _ = timed(sim, x)
+    t_sim, _ = timed(sim, x, runs=5)
     steps = int(fw.num_accepted_steps)
     print(f"| {n_modes} | {rtol:g} | {steps} | {t_scene:.3f} | {t_vjp:.3f} | {t_fwd:.3f} | {t_bwd:.3f} | "
           f"{t_quad:.3f} | {t_whole:.3f} | {t_sim:.3f} | {t_whole / t_sim:.2f} | "
