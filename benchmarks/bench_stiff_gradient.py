@@ -10,7 +10,7 @@ reference is computed in a process of its own). Each configuration runs in its o
 rows are written as they finish.
 
 Methods (`--methods`): `adjoint:dopri8`, `adjoint:rodas5p`, `autodiff:dopri8`, `autodiff:rodas5p`,
-`backsolve:rodas5p`; `--rtols` the forward tolerance (atol = 1e-2 rtol), the adjoint's backward
+`backsolve:rodas5p`, `discrete:rodas5p` (`ffr_jax.DiscreteAdjoint`, the discrete adjoint of Rodas5P); `--rtols` the forward tolerance (atol = 1e-2 rtol), the adjoint's backward
 tolerance `--backward-rtol` (default: the forward one; atol = 1e-2 of it).
 
 Usage:
@@ -53,6 +53,8 @@ def _method(name, rtol, backward_rtol, chunk, backward_atol=None):
         return ffr_jax.Adjoint(rtol=b, atol=a, solver=solver, chunk=chunk, grid=grid), solver
     if kind == "autodiff":
         return ffr_jax.Autodiff(), solver
+    if kind == "discrete":
+        return ffr_jax.DiscreteAdjoint(), solver
     if kind == "backsolve":
         b = rtol if backward_rtol is None else backward_rtol
         a = b * 1e-2 if backward_atol is None else backward_atol
@@ -153,7 +155,8 @@ def worker(spec):
 def markdown(data):
     loads = [r["load"][0] for r in data["rows"] if "load" in r]
     load = f" Load average (1 min) at the end of the rows: {min(loads):.1f}..{max(loads):.1f} on 2 cores." if loads else ""
-    lines = [f"Command: `{data['command']}`", "", f"Machine: {data['machine']}; {data['threads']}.{load}", "",
+    machine = f"Machine: {data['machine']}; {data['threads']}." if "machine" in data else "Machine: (not recorded with --no-write)."
+    lines = [f"Command: `{data['command']}`", "", f"{machine}{load}", "",
              "| modes | method:solver | rtol fwd / bwd | compile [s] | run [s] | forward [s] (steps) | run / forward | "
              "psi rel. error | grad rel. error (max norm) | peak RSS [MB] |",
              "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]

@@ -60,6 +60,7 @@ from ._sensitivity._autodiff import Autodiff as Autodiff
 from ._sensitivity._backsolve import Backsolve as Backsolve
 from ._sensitivity._base import AbstractSensitivity as AbstractSensitivity
 from ._sensitivity._direct import Direct as Direct
+from ._sensitivity._discrete_adjoint import DiscreteAdjoint as DiscreteAdjoint
 from ._sensitivity._finite_differences import FiniteDifferences as FiniteDifferences
 from ._sharding import sharded_map as sharded_map
 from ._solver import Rodas4 as Rodas4, Rodas5P as Rodas5P

@@ -26,6 +26,7 @@ from ._sensitivity._autodiff import Autodiff
 from ._sensitivity._backsolve import Backsolve
 from ._sensitivity._base import AbstractSensitivity
 from ._sensitivity._direct import Direct
+from ._sensitivity._discrete_adjoint import DiscreteAdjoint
 from ._sensitivity._finite_differences import FiniteDifferences
 from ._simulate import Trajectory, simulate as simulate_redundant, solve_minimal
 from ._typing import DesignsInput
@@ -35,6 +36,7 @@ METHODS = {
     "adjoint": Adjoint,
     "autodiff": Autodiff,
     "backsolve": Backsolve,
+    "discrete-adjoint": DiscreteAdjoint,
     "direct": Direct,
     "fd": FiniteDifferences,
 }

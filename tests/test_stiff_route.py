@@ -32,7 +32,9 @@ PSI_AGREE = 1e-8
 # (each of the order of the tolerances, ~1e-9..1e-8 after the design map's VJP), and methods differ
 # from each other by 1e-6 at most at these tolerances (tests/test_sensitivity.py: adjoint vs
 # autodiff 1e-6, backsolve 1e-5). The stiff route must meet the same bounds.
-GRADIENT_AGREE = {"adjoint": 1e-6, "autodiff": 1e-6, "backsolve": 1e-5}
+# The discrete adjoint (tests/test_discrete_adjoint.py) is the derivative of the discrete psi, as
+# autodiff is: the same bound.
+GRADIENT_AGREE = {"adjoint": 1e-6, "autodiff": 1e-6, "backsolve": 1e-5, "discrete-adjoint": 1e-6}
 
 
 @pytest.fixture(scope="module")
@@ -53,13 +55,15 @@ def explicit(case, x):
 
 
 def _method(name):
-    return {"adjoint": fj.Adjoint(**BACKWARD), "autodiff": fj.Autodiff(), "backsolve": fj.Backsolve(**BACKWARD)}[name]
+    return {"adjoint": fj.Adjoint(**BACKWARD), "autodiff": fj.Autodiff(), "backsolve": fj.Backsolve(**BACKWARD),
+            "discrete-adjoint": fj.DiscreteAdjoint()}[name]
 
 
 # Autodiff and backsolve through Rodas5P compile reverse mode through the solver's linearisation
 # (about 4-5 minutes each on the loaded 2-core machine): marked slow to keep the default suite
-# within its budget. The adjoint (backward on the forward's steps) compiles in 30-45 s and runs by default.
-@pytest.mark.parametrize("name", ["adjoint",
+# within its budget. The adjoint (backward on the forward's steps) compiles in 30-45 s and runs by default,
+# as does the discrete adjoint of Rodas5P (about 30 s).
+@pytest.mark.parametrize("name", ["adjoint", "discrete-adjoint",
                                   pytest.param("autodiff", marks=pytest.mark.slow),
                                   pytest.param("backsolve", marks=pytest.mark.slow)])
 def test_stiff_route_gives_the_explicit_psi_and_gradient(case, x, explicit, name):

@@ -1,0 +1,131 @@
+"""The discrete adjoint of Rodas5P (`ffr_jax.DiscreteAdjoint`, issue 15) is the derivative of the computed psi.
+
+Two independent routes to the same numbers: the hand-written transpose of one Rosenbrock step against
+`jax.vjp` of that step, and the whole backward recursion against `jax.grad` through diffrax on the
+forward solve's accepted steps (`diffrax.StepTo`). Its agreement with the explicit route is in
+tests/test_stiff_route.py. One small slider-crank (10 x 2 mesh, 3 modes, t1 = 0.2 s, the drivers'
+ramp ending at t = 0.05 s inside the motion).
+"""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.flatten_util
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ffr_jax as fj
+from ffr_jax._simulate import solve_minimal
+from ffr_jax._small_linalg import lu_factor
+from ffr_jax._solver._rosenbrock import rosenbrock_stages
+from ffr_jax._sensitivity._discrete_adjoint import _vector_field, step_transpose
+
+from helpers import assert_close_relative, random_design, small_case
+
+RTOL, ATOL = 1e-8, 1e-10
+
+
+@pytest.fixture(scope="module")
+def problem():
+    case = small_case(10, 2, 3, 0.2)
+    return case.problem_for(random_design(case, 3))
+
+
+def _flat(problem, h):
+    """`g(t, u, p) = h f(t, u, p)` on the flat state `(y, z, psi)` and the flat float parameters."""
+    field = _vector_field(problem)
+    dynamic, static = eqx.partition((problem.scene, problem.objective), eqx.is_inexact_array)
+    p, unravel_p = jax.flatten_util.ravel_pytree(dynamic)
+    u, unravel_u = jax.flatten_util.ravel_pytree((problem.y0, problem.z0, jnp.zeros(())))
+
+    def g(t, u, q):
+        return h * jax.flatten_util.ravel_pytree(field(t, unravel_u(u), eqx.combine(unravel_p(q), static)))[0]
+
+    return g, u, p
+
+
+def test_step_transpose_is_the_transpose_of_the_step(problem):
+    # One Rodas5P step as the solver takes it (Jacobian by forward mode, LU not differentiated, the
+    # stages' solves differentiated through their right-hand sides and matrix), differentiated in
+    # forward mode along a random direction `(du, dp)`, against the hand-written transpose applied to
+    # a random cotangent: `<u1bar, d step (du, dp)> = <step^T u1bar, (du, dp)>`. Both sides are exact
+    # derivatives; they differ by rounding in the stage solves and the products, measured 1.5e-13
+    # relative (the transpose agrees entry by entry with `jax.vjp` of the step to 2e-14). 1e-10
+    # leaves three orders for other platforms; a missing term is O(1) here (measured: without the
+    # step start's terms 4.9, without the stage VJPs 26, relative to the same scale).
+    tab = fj.Rodas5P.tableau
+    t0, h = 0.03, 2e-3  # inside the ramp: f_t does not vanish
+    g, u0, p = _flat(problem, h)
+    u0 = u0 + jnp.concatenate([jnp.full(3, 0.01), jnp.full(3, 0.3), jnp.zeros(1)])
+    n = u0.shape[0]
+
+    def step(u, q):
+        def g_of(t, uu):
+            return g(t, uu, q)
+
+        g0, linear = jax.linearize(g_of, t0, u)
+        columns = jax.vmap(linear)(jnp.zeros(n + 1).at[n].set(1.0), jnp.concatenate([jnp.eye(n), jnp.zeros((1, n))]))
+        matrix = jnp.eye(n) / tab.gamma - columns[:n].T
+        ks = rosenbrock_stages(tab, g_of, t0, h, u, g0, columns[n], matrix, lu_factor(jax.lax.stop_gradient(matrix)))
+        return u + jnp.asarray(tab.b) @ ks
+
+    rng = np.random.default_rng(0)
+    du, dp, u1bar = (jnp.asarray(rng.standard_normal(shape)) for shape in (u0.shape, p.shape, u0.shape))
+    forward = jax.jit(lambda du, dp: jax.jvp(step, (u0, p), (du, dp))[1])(du, dp)
+    u0bar, pbar = jax.jit(lambda c: step_transpose(tab, g, t0, h, u0, p, c))(u1bar)
+    lhs, rhs = float(u1bar @ forward), float(u0bar @ du + pbar @ dp)
+    # Relative to the sum of absolute products, so that a cancellation in the sum cannot pass a wrong transpose.
+    scale = float(jnp.abs(u1bar) @ jnp.abs(forward))
+    assert abs(lhs - rhs) <= 1e-10 * scale, (lhs, rhs, scale)
+
+
+# About 65 s (the reverse pass through diffrax compiles slowly): kept out of the default suite, whose
+# budget is 8 minutes on 2 cores; the default suite checks the discrete adjoint step by step (above)
+# and against the explicit route (tests/test_stiff_route.py).
+@pytest.mark.slow
+def test_discrete_adjoint_is_the_derivative_of_psi_on_the_forward_steps(problem):
+    # `jax.grad` through diffrax stepping exactly the forward solve's accepted steps (`StepTo`),
+    # against the discrete adjoint. The adaptive solve ends the step before the ramp's end at
+    # prevbefore(0.05) and starts the next at nextafter(0.05); `StepTo` gets both times (its extra
+    # step of two ulps adds ~1e-17 of psi). Both differentiate the same discrete psi; rounding
+    # accumulates over the ~900 steps' transposes, measured 6e-15 (scene) and 4e-13 (initial state)
+    # of the largest entry. 1e-10 keeps three orders of margin; recomputing the last stages of the
+    # step before the ramp's end on the wrong piece of the driver shows as 1e-9..1e-8.
+    kw = dict(rtol=RTOL, atol=ATOL, solver=fj.Rodas5P(), max_steps=4096)
+    psi, grad = eqx.filter_jit(lambda pr: fj.DiscreteAdjoint().value_and_grad_problem(pr, **kw))(problem)
+
+    obj = problem.objective
+    forward = solve_minimal(problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
+                            integrand=obj.integrand, solver=fj.Rodas5P(), rtol=RTOL, atol=ATOL, dense=True,
+                            max_steps=4096, jump_ts=problem.jump_ts)
+    dense = forward.solution.interpolation
+    ts = np.asarray(dense.ts[: int(dense.ts_size)])
+    assert problem.jump_ts == (0.05,) and np.nextafter(0.05, 1.0) in ts
+    ts = np.sort(np.append(ts, np.nextafter(0.05, 0.0)))
+    field = _vector_field(problem)
+    dynamic, static = eqx.partition((problem.scene, problem.objective), eqx.is_inexact_array)
+
+    @jax.jit
+    def on_steps(dynamic, y0, z0):
+        def psi(dynamic, y0, z0):
+            params = eqx.combine(dynamic, static)
+            solution = diffrax.diffeqsolve(
+                diffrax.ODETerm(lambda t, s, args: field(t, s, params)), fj.Rodas5P(), problem.t0, problem.t1, None,
+                (y0, z0, jnp.zeros(())), stepsize_controller=diffrax.StepTo(jnp.asarray(ts)), max_steps=len(ts))
+            return solution.ys[2][-1]
+
+        return jax.value_and_grad(psi, argnums=(0, 1, 2))(dynamic, y0, z0)
+
+    psi_steps, (g_dynamic, g_y0, g_z0) = on_steps(dynamic, problem.y0, problem.z0)
+    np.testing.assert_allclose(float(psi), float(psi_steps), rtol=1e-13)
+    assert_close_relative(jax.flatten_util.ravel_pytree(eqx.filter(grad.scene, eqx.is_inexact_array))[0],
+                          jax.flatten_util.ravel_pytree(g_dynamic[0])[0], 1e-10, "scene gradient")
+    assert_close_relative(jnp.concatenate([grad.y0, grad.z0]), jnp.concatenate([g_y0, g_z0]), 1e-10,
+                          "initial-state gradient")
+
+
+def test_discrete_adjoint_needs_a_rosenbrock_solver(problem):
+    with pytest.raises(ValueError, match="Rosenbrock"):
+        fj.DiscreteAdjoint().value_and_grad_problem(problem, rtol=RTOL, atol=ATOL, solver=diffrax.Dopri8(),
+                                                    max_steps=4096)
