@@ -43,7 +43,7 @@ METHODS = {
 
 
 def sensitivity_method(method: str | AbstractSensitivity) -> AbstractSensitivity:
-    """Map a method name (`"adjoint"`, `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`) to its object."""
+    """Map a method name (`"adjoint"`, `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`, `"discrete-adjoint"`) to its object."""
     if isinstance(method, AbstractSensitivity):
         return method
     if not isinstance(method, str) or method not in METHODS:
@@ -204,8 +204,11 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
       when the case designs one body; or a [`Problem`][] (no `x`).
     - `method`: `"adjoint"` (the paper's adjoint variable method, default), `"autodiff"`
       (`jax.grad` through diffrax), `"backsolve"` (diffrax `BacksolveAdjoint`), `"direct"`
-      (forward sensitivities), `"fd"` (central differences, designs only), or a configured method
-      object such as `ffr_jax.Adjoint(rtol=1e-9, atol=1e-11)` or `ffr_jax.FiniteDifferences(step=1e-4)`.
+      (forward sensitivities), `"fd"` (central differences, designs only), `"discrete-adjoint"`
+      (the discrete adjoint of a Rosenbrock forward solve, `ffr_jax.DiscreteAdjoint`: the derivative
+      of the computed psi at about half the cost of autodiff through it; `solver` defaults to
+      `ffr_jax.Rodas5P()` for it), or a configured method object such as
+      `ffr_jax.Adjoint(rtol=1e-9, atol=1e-11)` or `ffr_jax.FiniteDifferences(step=1e-4)`.
     - `rtol`, `atol`: forward tolerances (the paper's 1e-10 / 1e-12 by default).
     - `solver`: diffrax solver of the forward solve (default `Dopri8()`); the adjoint and backsolve
       methods integrate backward with the same solver when one is given, else with `Dopri8()`.

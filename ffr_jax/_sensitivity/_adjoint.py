@@ -328,7 +328,10 @@ class Adjoint(AbstractSensitivity):
       by forward mode through the equations of motion; on the reference case at 6 modes and
       rtol 1e-8 0.96 s backward against a 0.29 s forward, benchmarks/profile_adjoint_split.py), else diffrax's adaptive solve; `"forward"` insists on
       the former, `"adaptive"` on the latter (which also resolves the fast modes' free oscillations
-      of the adjoint, several times the cost).
+      of the adjoint, several times the cost). On the forward grid the gradient's error is about 100
+      rtol; [`DiscreteAdjoint`][ffr_jax.DiscreteAdjoint], the transpose of the Rosenbrock steps
+      themselves, is the derivative of the computed psi and the cheaper gradient at equal accuracy
+      (benchmarks/RESULTS.md, "The discrete adjoint of Rodas5P").
     - `quadrature`: Gauss–Legendre nodes per backward step (default 3: exact for polynomials of
       degree 5 on each step), or `None`.
     - `chunk`: backward steps per vectorised quadrature batch (default `None`: sized by the
