@@ -81,8 +81,8 @@ def test_step_transpose_is_the_transpose_of_the_step(problem):
 
 
 # About 65 s (the reverse pass through diffrax compiles slowly): kept out of the default suite, whose
-# budget is 8 minutes on 2 cores; the default suite checks the discrete adjoint step by step (above)
-# and against the explicit route (tests/test_stiff_route.py).
+# budget is 8 minutes on 2 cores (at 8:01 with the discrete adjoint's end-to-end tests in it); the
+# default suite checks the discrete adjoint step by step (above).
 @pytest.mark.slow
 def test_discrete_adjoint_is_the_derivative_of_psi_on_the_forward_steps(problem):
     # `jax.grad` through diffrax stepping exactly the forward solve's accepted steps (`StepTo`),
@@ -129,3 +129,24 @@ def test_discrete_adjoint_needs_a_rosenbrock_solver(problem):
     with pytest.raises(ValueError, match="Rosenbrock"):
         fj.DiscreteAdjoint().value_and_grad_problem(problem, rtol=RTOL, atol=ATOL, solver=diffrax.Dopri8(),
                                                     max_steps=4096)
+
+
+# About 75 s (two gradient programs compiled): kept out of the default suite, as the test above.
+@pytest.mark.slow
+def test_terminal_term_and_velocity_integrand():
+    # The rigid crank arm of tests/test_problem.py with its objective of the whole motion: a kinetic-energy
+    # integral (velocities) plus a terminal tracking term, so that the end condition `(dG/dy, dG/dz, 1)` and
+    # the terminal term's parameter derivatives are exercised. Against the paper's adjoint with Dopri8
+    # (a different discretisation and method): both are accurate to about the tolerances (1e-10) times
+    # the motion's conditioning; 1e-6 of the largest entry, as tests/test_problem.py allows between the
+    # adjoint and autodiff, catches a missing terminal or velocity term (1e-2..1 there).
+    from helpers import CRANK_ARM_POSITIONS, crank_arm_scene
+
+    objective = fj.Objective(integrand=fj.KineticEnergy(),
+                             terminal=fj.MarkerTracking(1, 1, fj.FixedPoint((0.25, -0.3))))
+    problem = fj.Problem(crank_arm_scene(), 1.0, positions=CRANK_ARM_POSITIONS, velocities=[0.5], objective=objective)
+    psi, grad = fj.value_and_grad(problem, method="discrete-adjoint", rtol=1e-10, atol=1e-12)
+    psi_ref, grad_ref = fj.value_and_grad(problem, method=fj.Adjoint(rtol=1e-10, atol=1e-12), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(float(psi), float(psi_ref), rtol=1e-8)
+    flat = lambda g: jax.flatten_util.ravel_pytree(eqx.filter(g, eqx.is_inexact_array))[0]
+    assert_close_relative(flat(grad), flat(grad_ref), 1e-6, "discrete adjoint vs the paper's adjoint")

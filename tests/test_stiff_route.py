@@ -61,9 +61,10 @@ def _method(name):
 
 # Autodiff and backsolve through Rodas5P compile reverse mode through the solver's linearisation
 # (about 4-5 minutes each on the loaded 2-core machine): marked slow to keep the default suite
-# within its budget. The adjoint (backward on the forward's steps) compiles in 30-45 s and runs by default,
-# as does the discrete adjoint of Rodas5P (about 30 s).
-@pytest.mark.parametrize("name", ["adjoint", "discrete-adjoint",
+# within its budget. The adjoint (backward on the forward's steps) compiles in 30-45 s and runs by default.
+# The discrete adjoint of Rodas5P (about 40 s) is slow too: the default suite checks it step by step and
+# on an objective with a terminal term (tests/test_discrete_adjoint.py).
+@pytest.mark.parametrize("name", ["adjoint", pytest.param("discrete-adjoint", marks=pytest.mark.slow),
                                   pytest.param("autodiff", marks=pytest.mark.slow),
                                   pytest.param("backsolve", marks=pytest.mark.slow)])
 def test_stiff_route_gives_the_explicit_psi_and_gradient(case, x, explicit, name):
