@@ -76,6 +76,15 @@ def consistent_minimal_state(model: MinimalModel, scene: Scene, t0, y_r0, z_r0, 
     return model.split(y_r0)[0], model.split(z_r0)[0]
 
 
+def minimal_vector_field(model: MinimalModel, t, state, scene: Scene, integrand: AbstractIntegrand | None):
+    """`(y', z')` of the minimal equations of motion, with `psi' = F` appended when there is an integrand:
+    the right-hand side [`solve_minimal`][] integrates, `state = (y, z)` or `(y, z, psi)`."""
+    y_r, z_r, zdot = model.state_and_accelerations(t, state[0], state[1], scene)
+    if integrand is None:
+        return state[1], zdot
+    return state[1], zdot, integrand(t, y_r, z_r, scene)
+
+
 def solve_minimal(
     model: MinimalModel,
     scene: Scene,
@@ -115,10 +124,7 @@ def solve_minimal(
 
     def field(t, state, args):
         model, scene_, integrand_, _ = unpack(args)
-        y_r, z_r, zdot = model.state_and_accelerations(t, state[0], state[1], scene_)
-        if integrand_ is None:
-            return state[1], zdot
-        return state[1], zdot, integrand_(t, y_r, z_r, scene_)
+        return minimal_vector_field(model, t, state, scene_, integrand_)
 
     y0, z0 = jnp.asarray(y0, float), jnp.asarray(z0, float)
     state0 = (y0, z0) if integrand is None else (y0, z0, jnp.zeros((), y0.dtype))

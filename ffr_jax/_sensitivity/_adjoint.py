@@ -14,10 +14,9 @@ import numpy as np
 
 from .._checks import optional_integer, tolerances
 from .._problem import Problem
-from .._simulate import solve_minimal
 from .._small_linalg import lu_factor, lu_solve, matmul, spd_solve
 from .._solver._rosenbrock import AbstractRosenbrock
-from ._base import AbstractSensitivity, problem_gradient
+from ._base import AbstractSensitivity, forward_solve, problem_gradient
 from ._forward_grid import ForwardGridSolution, backward_on_forward_grid
 
 
@@ -453,12 +452,7 @@ class Adjoint(AbstractSensitivity):
         return solution, terminal
 
     def value_and_grad_problem(self, problem, *, rtol, atol, solver, max_steps):
-        obj = problem.objective
-        forward = solve_minimal(
-            problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
-            integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol, dense=True,
-            max_steps=max_steps, jump_ts=problem.jump_ts, dt0=problem.dt0,
-        )
+        forward = forward_solve(problem, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps, dense=True)
         params = (problem.scene, problem.objective)
         unravel = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[1]
         backward_steps = max_steps if self.max_steps is None else self.max_steps

@@ -32,14 +32,20 @@ def problem_gradient(problem: Problem, grads) -> Problem:
                        is_leaf=lambda node: node is None)
 
 
-def psi_of(problem: Problem, *, rtol, atol, solver, max_steps, adjoint) -> jnp.ndarray:
-    """`psi` of a problem by one forward solve, differentiable through the given diffrax adjoint."""
+def forward_solve(problem: Problem, *, rtol, atol, solver, max_steps, dense: bool = False, adjoint=None):
+    """One forward solve of a problem with its objective (a [`Trajectory`][ffr_jax.Trajectory]; `dense`: with
+    the solver's dense output), differentiable through the given diffrax adjoint."""
     obj = problem.objective
     return solve_minimal(
         problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
-        integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol,
+        integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol, dense=dense,
         max_steps=max_steps, adjoint=adjoint, jump_ts=problem.jump_ts, dt0=problem.dt0,
-    ).psi
+    )
+
+
+def psi_of(problem: Problem, *, rtol, atol, solver, max_steps, adjoint) -> jnp.ndarray:
+    """`psi` of a problem by one forward solve, differentiable through the given diffrax adjoint."""
+    return forward_solve(problem, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps, adjoint=adjoint).psi
 
 
 class AbstractSensitivity(eqx.Module):

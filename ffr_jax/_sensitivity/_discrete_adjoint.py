@@ -35,23 +35,18 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 
 from .._problem import Problem
-from .._simulate import solve_minimal
+from .._simulate import minimal_vector_field
 from .._small_linalg import lu_factor, lu_solve
 from .._solver._rodas5p import Rodas5P
 from .._solver._rosenbrock import AbstractRosenbrock, rosenbrock_stages
-from ._base import AbstractSensitivity, problem_gradient
+from ._base import AbstractSensitivity, forward_solve, problem_gradient
 
 
 def _vector_field(problem: Problem):
-    """The minimal equations of motion with the integrand, as `solve_minimal` integrates them, of `(t, state, params)`."""
-    model = problem.model
+    """The right-hand side `solve_minimal` integrates, as a function of `(t, state, (scene, objective))`."""
 
     def field(t, state, params):
-        scene, objective = params
-        y_r, z_r, zdot = model.state_and_accelerations(t, state[0], state[1], scene)
-        if objective.integrand is None:
-            return state[1], zdot
-        return state[1], zdot, objective.integrand(t, y_r, z_r, scene)
+        return minimal_vector_field(problem.model, t, state, params[0], params[1].integrand)
 
     return field
 
@@ -132,11 +127,7 @@ class DiscreteAdjoint(AbstractSensitivity):
                 "Pass solver=ffr_jax.Rodas5P() (or leave solver unset), or use method='adjoint' or 'autodiff' "
                 "with other solvers.")
         obj = problem.objective
-        forward = solve_minimal(
-            problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
-            integrand=obj.integrand, terminal=obj.terminal, solver=solver, rtol=rtol, atol=atol, dense=True,
-            max_steps=max_steps, jump_ts=problem.jump_ts, dt0=problem.dt0,
-        )
+        forward = forward_solve(problem, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps, dense=True)
         params = (problem.scene, problem.objective)
         dynamic, static = eqx.partition(params, eqx.is_inexact_array)
         p_flat, unravel_p = jax.flatten_util.ravel_pytree(dynamic)
