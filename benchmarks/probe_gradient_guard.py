@@ -77,6 +77,7 @@ def main():
         ("autodiff", "rodas5p", 1e-10, ffr_jax.Autodiff(), Rodas5P()),
         ("adjoint", "rodas5p", 1e-10, ffr_jax.Adjoint(**back), Rodas5P()),
         ("backsolve", "rodas5p", 1e-10, ffr_jax.Backsolve(**back), Rodas5P()),
+        ("discrete-adjoint", "rodas5p", 1e-10, ffr_jax.DiscreteAdjoint(), Rodas5P()),
     ]
     if args.only:
         configs = [c for c in configs if f"{c[0]}:{c[1]}:{c[2]:g}" in args.only]
