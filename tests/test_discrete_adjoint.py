@@ -1,10 +1,11 @@
 """The discrete adjoint of Rodas5P (`ffr_jax.DiscreteAdjoint`, issue 15) is the derivative of the computed psi.
 
-Two independent routes to the same numbers: the hand-written transpose of one Rosenbrock step against
-`jax.vjp` of that step, and the whole backward recursion against `jax.grad` through diffrax on the
-forward solve's accepted steps (`diffrax.StepTo`). Its agreement with the explicit route is in
-tests/test_stiff_route.py. One small slider-crank (10 x 2 mesh, 3 modes, t1 = 0.2 s, the drivers'
-ramp ending at t = 0.05 s inside the motion).
+Independent routes to the same numbers: the hand-written transpose of one Rosenbrock step against forward
+mode through that step (default suite), the whole backward recursion against `jax.grad` through diffrax
+on the forward solve's accepted steps (`diffrax.StepTo`), and an objective with a terminal term against
+the paper's adjoint (both `-m slow`, for the suite's 8-minute budget; its agreement with the explicit
+route is `tests/test_stiff_route.py[discrete-adjoint]`, slow too). One small slider-crank (10 x 2 mesh,
+3 modes, t1 = 0.2 s, the drivers' ramp ending at t = 0.05 s inside the motion).
 """
 
 import diffrax
