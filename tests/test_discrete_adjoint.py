@@ -19,7 +19,7 @@ import pytest
 import ffr_jax as fj
 from ffr_jax._simulate import solve_minimal
 from ffr_jax._small_linalg import lu_factor
-from ffr_jax._solver._rosenbrock import rosenbrock_stages
+from ffr_jax._solver._rosenbrock import rosenbrock_matrix, rosenbrock_stages
 from ffr_jax._sensitivity._discrete_adjoint import _vector_field, step_transpose
 
 from helpers import assert_close_relative, random_design, small_case
@@ -59,16 +59,13 @@ def test_step_transpose_is_the_transpose_of_the_step(problem):
     t0, h = 0.03, 2e-3  # inside the ramp: f_t does not vanish
     g, u0, p = _flat(problem, h)
     u0 = u0 + jnp.concatenate([jnp.full(3, 0.01), jnp.full(3, 0.3), jnp.zeros(1)])
-    n = u0.shape[0]
 
     def step(u, q):
         def g_of(t, uu):
             return g(t, uu, q)
 
-        g0, linear = jax.linearize(g_of, t0, u)
-        columns = jax.vmap(linear)(jnp.zeros(n + 1).at[n].set(1.0), jnp.concatenate([jnp.eye(n), jnp.zeros((1, n))]))
-        matrix = jnp.eye(n) / tab.gamma - columns[:n].T
-        ks = rosenbrock_stages(tab, g_of, t0, h, u, g0, columns[n], matrix, lu_factor(jax.lax.stop_gradient(matrix)))
+        g0, g_t, matrix = rosenbrock_matrix(tab, g_of, t0, u)
+        ks = rosenbrock_stages(tab, g_of, t0, h, u, g0, g_t, matrix, lu_factor(jax.lax.stop_gradient(matrix)))
         return u + jnp.asarray(tab.b) @ ks
 
     rng = np.random.default_rng(0)

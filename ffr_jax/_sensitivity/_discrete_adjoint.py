@@ -38,7 +38,7 @@ from .._problem import Problem
 from .._simulate import minimal_vector_field
 from .._small_linalg import lu_factor, lu_solve
 from .._solver._rodas5p import Rodas5P
-from .._solver._rosenbrock import AbstractRosenbrock, rosenbrock_stages
+from .._solver._rosenbrock import AbstractRosenbrock, rosenbrock_matrix, rosenbrock_stages
 from ._base import AbstractSensitivity, forward_solve, problem_gradient
 
 
@@ -61,12 +61,7 @@ def step_transpose(tab, g, t0, h, u0, p, u1bar):
     def g_of(t, u):
         return g(t, u, p)
 
-    g0, linear = jax.linearize(g_of, t0, u0)
-    tangents_t = jnp.zeros(n + 1, dtype).at[n].set(1.0)
-    tangents_u = jnp.concatenate([jnp.eye(n, dtype=dtype), jnp.zeros((1, n), dtype)])
-    columns = jax.vmap(linear)(tangents_t, tangents_u)
-    jac, g_t = columns[:n].T, columns[n]
-    matrix = jnp.eye(n, dtype=dtype) / tab.gamma - jac
+    g0, g_t, matrix = rosenbrock_matrix(tab, g_of, t0, u0)
     lu = lu_factor(matrix)
     ks = rosenbrock_stages(tab, g_of, t0, h, u0, g0, g_t, matrix, lu)
 

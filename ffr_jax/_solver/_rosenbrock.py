@@ -125,6 +125,19 @@ def _solve_jvp(primals, tangents):
     return x, lu_solve(lu, d_rhs - d_matrix @ x)
 
 
+def rosenbrock_matrix(tab: RosenbrockTableau, g, t0, u0):
+    """`(g0, g_t, matrix)` at the start of a Rosenbrock step: `g(t0, u0)`, `dg/dt` and `I / gamma - dg/du`.
+
+    One `jax.linearize` of `g` and a `vmap` of its linear map over the `n + 1` unit tangents.
+    """
+    n, dtype = u0.shape[0], u0.dtype
+    g0, linear = jax.linearize(g, t0, u0)
+    tangents_t = jnp.zeros(n + 1, jnp.result_type(t0)).at[n].set(1.0)
+    tangents_u = jnp.concatenate([jnp.eye(n, dtype=dtype), jnp.zeros((1, n), dtype)])
+    columns = jax.vmap(linear)(tangents_t, tangents_u)  # (n + 1, n)
+    return g0, columns[n], jnp.eye(n, dtype=dtype) / tab.gamma - columns[:n].T
+
+
 def rosenbrock_stages(tab: RosenbrockTableau, g, t0, h, u0, g0, g_t, matrix, lu):
     """The `(s, n)` stages `k_i` of one Rosenbrock step (module docstring) for `g(t, u) = h f(t, u)`.
 
@@ -206,19 +219,13 @@ class AbstractRosenbrock(diffrax.AbstractAdaptiveSolver):
         tab = self.tableau
         u0, unravel = jax.flatten_util.ravel_pytree(y0)
         dtype = u0.dtype
-        n = u0.shape[0]
         control = terms.contr(t0, t1)
         h = t1 - t0
 
         def g(t, u):
             return jax.flatten_util.ravel_pytree(terms.vf_prod(t, unravel(u), args, control))[0]
 
-        g0, linear = jax.linearize(g, t0, u0)
-        tangents_t = jnp.zeros(n + 1, dtype).at[n].set(1.0)
-        tangents_u = jnp.concatenate([jnp.eye(n, dtype=dtype), jnp.zeros((1, n), dtype)])
-        columns = jax.vmap(linear)(tangents_t.astype(jnp.result_type(t0)), tangents_u)  # (n + 1, n)
-        jac, g_t = columns[:n].T, columns[n]
-        matrix = jnp.eye(n, dtype=dtype) / tab.gamma - jac
+        g0, g_t, matrix = rosenbrock_matrix(tab, g, t0, u0)
         lu = lu_factor(jax.lax.stop_gradient(matrix))
 
         ks = rosenbrock_stages(tab, g, t0, h, u0, g0, g_t, matrix, lu)
