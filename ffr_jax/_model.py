@@ -23,7 +23,7 @@ import scipy.linalg
 
 from ._errors import SimulationError, branched_error_if
 from ._scene._scene import Scene
-from ._small_linalg import lu_factor, lu_solve, matmul, spd_solve
+from ._small_linalg import factored_solve, lu_factor, lu_solve, matmul, spd_solve
 
 
 class Partition(eqx.Module):
@@ -432,5 +432,8 @@ def _state_and_accelerations_tangents(model, t, y, z, scene, dt, dy, dz, dscene)
     zdot = spd_solve(mbar, rhs)
     d_residual = jax.jvp(residual_at(zdot), (t, y_r, z_r, *extra), (dt, dy_r, dz_r, *d_extra))[1]
     # The tangent solve must be linear in `d_residual` for reverse mode (transposition): `lu_solve`
-    # is, the augmented elimination of `spd_solve` is not.
-    return (y_r, z_r, zdot), (dy_r, dz_r, -lu_solve(lu_factor(mbar), d_residual))
+    # is, the augmented elimination of `spd_solve` is not. Differentiated again (the discrete adjoint's
+    # second derivatives, `jax.grad` through a Rosenbrock solve), it is differentiated through its
+    # solution, not through the elimination (`factored_solve`).
+    lu = lu_factor(mbar)
+    return (y_r, z_r, zdot), (dy_r, dz_r, -factored_solve(mbar, lu, d_residual))

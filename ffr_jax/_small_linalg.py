@@ -151,6 +151,29 @@ def lu_solve(lu: LU, b, trans: int = 0):
     return x[:, 0] if vector else x
 
 
+@jax.custom_jvp
+def factored_solve(matrix, lu: LU, rhs):
+    """`matrix^-1 rhs` with `lu` the [`lu_factor`][] of `matrix`, differentiated through the solution.
+
+    `d(A^-1 b) = A^-1 (db - dA x)` with the primal factors; the tangent of `lu` is ignored (it is that
+    of `dA`). Differentiating the elimination instead costs a batched LU derivative per tangent under
+    `jax.vmap`, and in reverse mode over forward mode (the second derivatives of the equations of motion
+    that `jax.grad` through a Rosenbrock step and the discrete adjoint form) the transpose of the whole
+    unrolled elimination. Linear in `rhs`, so it can be transposed; pass `lu = lu_factor(matrix)`
+    without `stop_gradient`, so that forward mode over the transpose (a Hessian by `jax.jacfwd` of
+    `jax.grad`) still differentiates the factors: that route does not see this rule.
+    """
+    return lu_solve(lu, rhs)
+
+
+@factored_solve.defjvp
+def _factored_solve_jvp(primals, tangents):
+    matrix, lu, rhs = primals
+    d_matrix, _, d_rhs = tangents
+    x = lu_solve(lu, rhs)
+    return x, lu_solve(lu, d_rhs - matmul(d_matrix, x))
+
+
 def spd_solve(a, b):
     """`A^-1 b` for a symmetric positive definite `A` (Cholesky for `n > UNROLL_MAX`).
 

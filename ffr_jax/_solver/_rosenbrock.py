@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from .._small_linalg import lu_factor, lu_solve
+from .._small_linalg import factored_solve, lu_factor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,28 +103,6 @@ def lower(rows, s: int):
     return out
 
 
-@jax.custom_jvp
-def _solve(matrix, lu, rhs):
-    """`matrix^-1 rhs` with `lu` the LU factors of `matrix` (computed outside, not differentiated).
-
-    The factors are those of `ffr_jax._small_linalg` (unrolled elimination for small systems, LAPACK
-    with the row permutation formed once for larger ones): `jax.scipy.linalg.lu_solve` turns the
-    pivots into a permutation by a loop over the rows in every solve, which at 61 unknowns cost
-    more than the rest of the step.
-    """
-    return lu_solve(lu, rhs)
-
-
-@_solve.defjvp
-def _solve_jvp(primals, tangents):
-    # d(W^-1 r) = W^-1 (dr - dW x) with the primal factors: differentiating the factorisation instead
-    # costs a batched LU derivative per tangent under `jax.vmap` (forward-mode sensitivities).
-    matrix, lu, rhs = primals
-    d_matrix, _, d_rhs = tangents
-    x = lu_solve(lu, rhs)
-    return x, lu_solve(lu, d_rhs - d_matrix @ x)
-
-
 def rosenbrock_matrix(tab: RosenbrockTableau, g, t0, u0):
     """`(g0, g_t, matrix)` at the start of a Rosenbrock step: `g(t0, u0)`, `dg/dt` and `I / gamma - dg/du`.
 
@@ -148,12 +126,12 @@ def rosenbrock_stages(tab: RosenbrockTableau, g, t0, h, u0, g0, g_t, matrix, lu)
     s, n, dtype = tab.stages, u0.shape[0], u0.dtype
     a = jnp.asarray(tab.a, dtype)
     coupling = jnp.asarray(tab.c_coupling, dtype)
-    ks = jnp.zeros((s, n), dtype).at[0].set(_solve(matrix, lu, g0 + (tab.d[0] * h) * g_t))
+    ks = jnp.zeros((s, n), dtype).at[0].set(factored_solve(matrix, lu, g0 + (tab.d[0] * h) * g_t))
 
     def stage(ks, coefficients):
         i, a_i, coupling_i, c_i, d_i = coefficients
         gi = g(t0 + c_i * h, u0 + a_i @ ks)
-        return ks.at[i].set(_solve(matrix, lu, gi + (d_i * h) * g_t + coupling_i @ ks)), None
+        return ks.at[i].set(factored_solve(matrix, lu, gi + (d_i * h) * g_t + coupling_i @ ks)), None
 
     ks, _ = jax.lax.scan(stage, ks, (jnp.arange(1, s), a[1:], coupling[1:], jnp.asarray(tab.c[1:], dtype),
                                      jnp.asarray(tab.d[1:], dtype)))
@@ -226,7 +204,7 @@ class AbstractRosenbrock(diffrax.AbstractAdaptiveSolver):
             return jax.flatten_util.ravel_pytree(terms.vf_prod(t, unravel(u), args, control))[0]
 
         g0, g_t, matrix = rosenbrock_matrix(tab, g, t0, u0)
-        lu = lu_factor(jax.lax.stop_gradient(matrix))
+        lu = lu_factor(matrix)
 
         ks = rosenbrock_stages(tab, g, t0, h, u0, g0, g_t, matrix, lu)
         u1 = u0 + jnp.asarray(tab.b, dtype) @ ks
