@@ -47,6 +47,7 @@ def test_custom_derivative_of_accelerations_equals_the_direct_one(n_modes):
         close(a, b, "reverse-mode derivative with respect to the scene")
 
 
+@pytest.mark.slow
 def test_second_derivatives_of_accelerations_by_both_orders_of_differentiation():
     # Second derivatives of the accelerations with respect to the state, as the discrete adjoint of a
     # Rosenbrock step and `jax.grad` through it form them (reverse mode over the forward-mode rule of
@@ -56,8 +57,9 @@ def test_second_derivatives_of_accelerations_by_both_orders_of_differentiation()
     # factors held constant (`stop_gradient`) the second was 1.04 off here (4.6e-5 in a step of the
     # reference case). Both are exact, and the first derivatives they build on are checked against the
     # direct route above; they differ by rounding amplified by cond(Mbar) twice, measured 2e-16 of the
-    # largest entry (each also 2e-16 from differentiating the direct route twice, not compiled here for
-    # the suite's time); 1e-10 leaves six orders for other platforms, a missing term is O(1).
+    # largest entry (each also 2e-16 from differentiating the direct route twice, not compiled here);
+    # 1e-10 leaves six orders for other platforms, a missing term is O(1). Slow (8.6 s, the suite's
+    # 8-minute budget); `factored_solve` in both orders is tests/test_small_linalg.py, default suite.
     case = small_case(10, 2, 3, 0.2)
     model, scene = case.model, case.scene(case.initial_design(0.5))
     f = model.partition.n_independent
