@@ -159,9 +159,10 @@ def factored_solve(matrix, lu: LU, rhs):
     of `dA`). Differentiating the elimination instead costs a batched LU derivative per tangent under
     `jax.vmap`, and in reverse mode over forward mode (the second derivatives of the equations of motion
     that `jax.grad` through a Rosenbrock step and the discrete adjoint form) the transpose of the whole
-    unrolled elimination. Linear in `rhs`, so it can be transposed; pass `lu = lu_factor(matrix)`
-    without `stop_gradient`, so that forward mode over the transpose (a Hessian by `jax.jacfwd` of
-    `jax.grad`) still differentiates the factors: that route does not see this rule. (The factors are
+    unrolled elimination. Linear in `rhs`, so it can be transposed. Forward mode over the transpose (a
+    Hessian by `jax.jacfwd` of `jax.grad`) does not see this rule: it is exact only when `lu` is
+    `lu_factor(matrix)` without `stop_gradient` (as in the equations of motion); with frozen factors
+    (the Rosenbrock step, for speed) that route misses their dependence. (The factors are
     this module's, not `jax.scipy.linalg.lu_factor`'s, whose `lu_solve` turns the pivots into a
     permutation by a loop over the rows in every solve: at 61 unknowns more than the rest of a
     Rosenbrock step.)
