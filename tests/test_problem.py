@@ -92,7 +92,7 @@ def _central_difference(problem, where, index, step):
 
 
 def _every_entry(problem):
-    """`(label, perturbed(h))` for every scalar of every float array of `problem`: `perturbed(h)` is the
+    """`(label, value, perturbed)` for every scalar of every float array of `problem`: `perturbed(h)` is the
     problem with that scalar moved by `h` (in place, so dtypes and weak types, and so the compiled
     programs, stay those of `problem`)."""
     dynamic, static = eqx.partition(problem, eqx.is_inexact_array)
