@@ -15,11 +15,17 @@ and the virtual work `sum_n delta r_n^T M rddot_n` gives `M_b(y_b) zdot_b + h_om
 - `h_omega,R = A (-theta'^2 S_u + 2 theta' I~ S1 q')`,
 - `h_omega,theta = 2 theta' (j1 + M_qq q).q'`,
 - `h_omega,q = -theta'^2 (j1 + M_qq q) + 2 theta' G q'`, and the inner force `h_e = K_qq q`.
+
+A body is planar or spatial by its data: the functions below take [`BodyData`][] (planar, above) or
+[`SpatialBodyData`][] (a rigid spatial body in Euler parameters, `ffr_jax._spatial._rigid_body`) and
+dispatch on that type at trace time, so a planar scene traces exactly the planar code.
 """
 
 import jax.numpy as jnp
 
 from ._scene._body_data import BodyData
+from ._spatial import _rigid_body as spatial
+from ._spatial._body_data import SpatialBodyData
 
 
 def rotation(theta):
@@ -54,8 +60,25 @@ def split_body_coordinates(y_b, n_modes: int):
     return y_b[:2], y_b[2], y_b[3:]
 
 
-def body_mass_matrix(data: BodyData, y_b):
-    """Mass matrix `M_b(y_b)`, `(3 + n_q, 3 + n_q)`, symmetric positive definite."""
+def body_coordinate_names(data: BodyData | SpatialBodyData) -> tuple[str, ...]:
+    """Names of a body's coordinates: `R_x, R_y, theta, q_1, ...` (planar) or `R_x, R_y, R_z, e0..e3` (spatial)."""
+    if isinstance(data, SpatialBodyData):
+        return ("R_x", "R_y", "R_z", "e0", "e1", "e2", "e3")
+    return ("R_x", "R_y", "theta") + tuple(f"q_{k + 1}" for k in range(data.n_modes))
+
+
+def body_strain_energy(data: BodyData | SpatialBodyData, y_b):
+    """`1/2 q^T K_qq q` of a flexible body (zero for a rigid spatial body)."""
+    if isinstance(data, SpatialBodyData):
+        return jnp.zeros((), y_b.dtype)
+    q = y_b[3:]
+    return 0.5 * q @ data.modal_stiffness @ q
+
+
+def body_mass_matrix(data: BodyData | SpatialBodyData, y_b):
+    """Mass matrix `M_b(y_b)`, `(3 + n_q, 3 + n_q)` (planar) or `(7, 7)` (spatial), symmetric positive definite."""
+    if isinstance(data, SpatialBodyData):
+        return spatial.mass_matrix(data, y_b)
     _, theta, q = split_body_coordinates(y_b, data.n_modes)
     s_u = data.first_moment + _matvec(data.modal_moment, q)
     mq = data.inertia_q + _matvec(data.modal_mass, q)
@@ -70,8 +93,10 @@ def body_mass_matrix(data: BodyData, y_b):
     return jnp.concatenate([top, mid, bot], axis=0)
 
 
-def body_inertia_and_elastic_forces(data: BodyData, y_b, z_b):
-    """`-h_omega - h_e`: the quadratic-velocity (Coriolis, centrifugal) and elastic forces, `(3 + n_q,)`."""
+def body_inertia_and_elastic_forces(data: BodyData | SpatialBodyData, y_b, z_b):
+    """`-h_omega - h_e`: the quadratic-velocity (Coriolis, centrifugal, gyroscopic) and elastic forces."""
+    if isinstance(data, SpatialBodyData):
+        return spatial.inertia_forces(data, y_b, z_b)
     _, theta, q = split_body_coordinates(y_b, data.n_modes)
     _, dtheta, dq = split_body_coordinates(z_b, data.n_modes)
     s_u = data.first_moment + _matvec(data.modal_moment, q)
@@ -82,12 +107,16 @@ def body_inertia_and_elastic_forces(data: BodyData, y_b, z_b):
     return -jnp.concatenate([h_r, h_t[None], h_q])
 
 
-def marker_position(data: BodyData, marker: int, y_b):
-    """Inertial position `r_P = R + A(theta) (c_P + Phi_P q)` of body marker `marker`."""
+def marker_position(data: BodyData | SpatialBodyData, marker: int, y_b):
+    """Inertial position `r_P = R + A(theta) (c_P + Phi_P q)` of body marker `marker` (`R + A(p) u_P` spatial)."""
+    if isinstance(data, SpatialBodyData):
+        return spatial.marker_position(data, marker, y_b)
     r, theta, q = split_body_coordinates(y_b, data.n_modes)
     return r + rotate(theta, data.marker_positions[marker] + _matvec(data.marker_modes[marker], q))
 
 
-def body_kinetic_energy(data: BodyData, y_b, z_b):
-    """`T = 1/2 z_b^T M_b(y_b) z_b` from the body data."""
+def body_kinetic_energy(data: BodyData | SpatialBodyData, y_b, z_b):
+    """`T = 1/2 z_b^T M_b(y_b) z_b` from the body data (spatial: without the radial rate of `p`, which carries none)."""
+    if isinstance(data, SpatialBodyData):
+        return spatial.kinetic_energy(data, y_b, z_b)
     return 0.5 * z_b @ body_mass_matrix(data, y_b) @ z_b

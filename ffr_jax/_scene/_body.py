@@ -2,15 +2,19 @@
 
 import equinox as eqx
 
+from .._spatial._body_data import SpatialBodyData
 from ._body_data import BodyData
 
 
 class Body(eqx.Module):
-    """A planar body with coordinates `(R_x, R_y, theta, q_1..q_{n_q})`; rigid when `n_q = 0`."""
+    """A body with coordinates `(R_x, R_y, theta, q_1..q_{n_q})` (planar [`BodyData`][]; rigid when `n_q = 0`)
+    or `(R_x, R_y, R_z, e0, e1, e2, e3)` (a rigid spatial body, [`SpatialBodyData`][]; Euler parameters)."""
 
     name: str = eqx.field(static=True)
-    data: BodyData
+    data: BodyData | SpatialBodyData
 
     @property
     def n_coordinates(self) -> int:
+        if isinstance(self.data, SpatialBodyData):
+            return 7
         return 3 + self.data.n_modes

@@ -6,14 +6,17 @@ import jax.scipy.linalg as jsl
 import jax.tree_util as jtu
 
 from .._body_dynamics import (
+    body_coordinate_names,
     body_inertia_and_elastic_forces,
     body_kinetic_energy,
     body_mass_matrix,
+    body_strain_energy,
     marker_position,
 )
 from ._base import AbstractConstraint, AbstractForce
 from ._body import Body
 from ._laws import AbstractLaw
+from ._references import check_references
 
 
 class Scene(eqx.Module):
@@ -32,6 +35,9 @@ class Scene(eqx.Module):
         names = [b.name for b in self.bodies]
         if len(set(names)) != len(names):
             raise ValueError(f"Body names must be unique, got {names}.")
+        for group in ("constraints", "forces"):
+            for k, element in enumerate(getattr(self, group)):
+                check_references(element, self, f"Scene {group}[{k}]")
 
     @property
     def sizes(self) -> tuple[int, ...]:
@@ -71,8 +77,7 @@ class Scene(eqx.Module):
     def coordinate_names(self) -> tuple[str, ...]:
         names = []
         for b in self.bodies:
-            names += [f"{b.name}.R_x", f"{b.name}.R_y", f"{b.name}.theta"]
-            names += [f"{b.name}.q_{k + 1}" for k in range(b.data.n_modes)]
+            names += [f"{b.name}.{n}" for n in body_coordinate_names(b.data)]
         return tuple(names)
 
     def body_coordinates(self, b: int, v):
@@ -118,8 +123,7 @@ class Scene(eqx.Module):
         """Strain energy of all flexible bodies plus the potentials of conservative force elements."""
         total = jnp.zeros(())
         for i, b in enumerate(self.bodies):
-            q = self.body_coordinates(i, y_r)[3:]
-            total = total + 0.5 * q @ b.data.modal_stiffness @ q
+            total = total + body_strain_energy(b.data, self.body_coordinates(i, y_r))
         for f in self.forces:
             total = total + f.potential_energy(t, y_r, self)
         return total

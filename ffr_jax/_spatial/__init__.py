@@ -1,0 +1,1 @@
+"""Spatial bodies in the floating frame of reference: Euler parameters, rigid body data and dynamics, joints."""
