@@ -8,6 +8,7 @@ from jaxtyping import Array, Float
 
 from ._model import MinimalModel, Partition, _constraint_jacobian, choose_partition, hadamard_ratio
 from ._objective._objective import Objective, as_objective
+from ._scene._references import check_references
 from ._scene._scene import Scene
 
 
@@ -240,6 +241,7 @@ def _terms_and_derivatives(problem: Problem):
 
 def _check_objective(problem: Problem, y_r0, check_terminal: bool) -> None:
     """The objective's terms are scalars and finite at the initial state; the terminal term sees the motion."""
+    check_references(problem.objective, problem.scene, "objective")
     t0 = jnp.asarray(problem.t0)
     z_r0 = jnp.zeros_like(jnp.asarray(y_r0))
     for name in ("integrand", "terminal"):

@@ -271,6 +271,42 @@ API = [
         "load_checkpoint()"),
 ]
 
+# --- issue 32: bad input that still got through ---------------------------------------------------
+# Each row names the outcome the issue reported (before) in its comment; the row is the outcome now.
+
+
+def _crank() -> fj.Body:
+    return fj.Body("crank", fj.rigid_body_data(1.0, (0.05, 0.0), 0.01, [(0.0, 0.0), (0.1, 0.0)]))
+
+
+def _two_bodies(c: Ctx, constraints=(), forces=()):
+    return fj.Scene((c.case.problem.scene.bodies[0], _crank()), tuple(constraints), tuple(forces))
+
+
+_NOT_A_MARKER = r"is not a marker of body \d .*valid indices are 0 to 1"
+_NOT_A_BODY = r"is not a body of the scene: valid indices are 0 to"
+API_32 = [
+    # Silently wrong before (JAX's gather clamps a marker index to the last marker; a negative body index
+    # counts from the end): refused where the element meets the scene, naming the element, index and range.
+    Bad("Revolute(marker_j=7) on a body with 2 markers", lambda c: _two_bodies(c, [fj.Revolute(0, 0, 1, 7)]), V,
+        r"constraints\[0\] \(Revolute\)\.marker_j = 7 " + _NOT_A_MARKER, "Scene()"),
+    Bad("Revolute to body 2 of 2", lambda c: _two_bodies(c, [fj.Revolute(0, 0, 2, 0)]), V,
+        r"Revolute\)\.body_j = 2 " + _NOT_A_BODY + " 1", "Scene()"),
+    Bad("GroundRevolute(body=-1)", lambda c: _two_bodies(c, [fj.GroundRevolute(-1, 0)]), V,
+        r"GroundRevolute\)\.body = -1 " + _NOT_A_BODY + " 1.*negative index does not count from the end",
+        "Scene()"),
+    Bad("SpringDamper on marker 9", lambda c: _two_bodies(c, forces=[fj.SpringDamper(0, 9, stiffness=1.0)]), V,
+        r"forces\[0\] \(SpringDamper\)\.marker_i = 9 " + _NOT_A_MARKER, "Scene()"),
+    Bad("MarkerTracking(body=0, marker=9)", lambda c: c.case.with_objective(fj.MarkerTracking(0, 9, (0.0, 0.0))), V,
+        r"MarkerTracking\.marker = 9 " + _NOT_A_MARKER, "Problem() (objective)"),
+    Bad("MarkerTracking(body=1) on a one-body scene", lambda c: c.case.with_objective(
+        fj.MarkerTracking(1, 0, (0.0, 0.0))), V, r"MarkerTracking\.body = 1 " + _NOT_A_BODY + " 0",
+        "Problem() (objective)"),
+    Bad("Compliance(body=-1) inside a weighted sum", lambda c: c.case.with_objective(
+        fj.KineticEnergy() + 2.0 * fj.Compliance(-1)), V, r"Compliance\.body = -1 " + _NOT_A_BODY, "Problem() (objective)"),
+]
+API += API_32
+
 # Every command line has the small mesh; the bad option is what fails, before anything compiles.
 G = "gradient slider-crank --nx 4 --ny 2 --modes 2 --t1 0.05"
 O = "optimize slider-crank --nx 4 --ny 2 --modes 2 --t1 0.05 --iters 1"
