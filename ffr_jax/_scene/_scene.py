@@ -17,7 +17,6 @@ from ._base import AbstractConstraint, AbstractForce
 from ._body import Body
 from ._laws import AbstractLaw
 from ._references import check_references
-from ._references import check_references
 
 
 class Scene(eqx.Module):
@@ -36,9 +35,6 @@ class Scene(eqx.Module):
         names = [b.name for b in self.bodies]
         if len(set(names)) != len(names):
             raise ValueError(f"Body names must be unique, got {names}.")
-        for group in ("constraints", "forces"):
-            for k, element in enumerate(getattr(self, group)):
-                check_references(element, self, f"Scene {group}[{k}]")
         for group in ("constraints", "forces"):
             for k, element in enumerate(getattr(self, group)):
                 check_references(element, self, f"Scene {group}[{k}]")
