@@ -31,6 +31,7 @@ from ._gradient_plot import plot_field as plot_field, plot_gradient as plot_grad
 from ._io._animation import Animation as Animation, animate as animate, body_motion as body_motion
 from ._io._outline import density_outline as density_outline, write_dxf as write_dxf, write_svg as write_svg
 from ._io._vtu import write_vtu as write_vtu
+from ._io._vtu_series import write_vtu_series as write_vtu_series
 from ._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
 from ._objective._base import AbstractIntegrand as AbstractIntegrand
 from ._objective._combine import Scaled as Scaled, Sum as Sum

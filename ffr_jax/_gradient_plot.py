@@ -4,7 +4,8 @@
 import numpy as np
 
 from ._case import Case
-from ._design.domain import SOLID, VOID
+from ._design.domain import SOLID
+from ._design.mesh import StructuredGrid
 
 
 def row_signs(case: Case, grad) -> list[dict]:
@@ -44,7 +45,9 @@ def plot_gradient(case: Case, grad, *, title: str | None = None, figure=None):
 
     The design region spans the element columns `1 .. nx-2` (the interface columns carry no design
     variable): `x` from `L/nx` to `L - L/nx` (0.01 … 0.99 m for the reference rod) and `y` from
-    `-h/2` to `h/2`; each value sits at its element's centre.
+    `-h/2` to `h/2`; each value sits at its element's centre. On any other mesh (a gmsh part, the
+    holed link) the surface is triangulated over the design elements' centroids and the map below
+    is [`plot_field`][]`(signed=True)`, passive elements grey.
 
     **Arguments:**
     - `case`: the case whose rod the design shapes; `grad`: `(n_design,)` gradient in design order.
@@ -56,6 +59,8 @@ def plot_gradient(case: Case, grad, *, title: str | None = None, figure=None):
     from matplotlib.figure import Figure
 
     mesh = case.mesh
+    if not isinstance(mesh, StructuredGrid):
+        return _plot_gradient_on_elements(case, grad, title=title, figure=figure)
     grid = case.design_grid(grad)
     centres = case.design.domain.design_centroids().reshape(mesh.ny, mesh.nx - 2, 2)
     xc, yc = centres[..., 0], centres[..., 1]
@@ -90,6 +95,38 @@ def plot_gradient(case: Case, grad, *, title: str | None = None, figure=None):
     return figure
 
 
+def _plot_gradient_on_elements(case: Case, grad, *, title: str | None, figure):
+    """[`plot_gradient`][] on any mesh: a surface over the design elements' centroids (triangulated) above
+    the signed field drawn element by element ([`plot_field`][], passive elements grey)."""
+    from matplotlib.colors import TwoSlopeNorm
+    from matplotlib.figure import Figure
+
+    domain = case.design.domain
+    grad = np.asarray(grad, dtype=float)
+    if grad.shape != (domain.n_design,):
+        raise ValueError(f"plot_gradient takes a vector of shape ({domain.n_design},), got {grad.shape}.")
+    centres = domain.design_centroids()
+    scale = float(np.max(np.abs(grad))) or 1.0
+    if figure is None:
+        figure = Figure(figsize=(10, 8), layout="constrained")
+    grid_spec = figure.add_gridspec(2, 1, height_ratios=(3, 2))
+    surface_ax = figure.add_subplot(grid_spec[0], projection="3d")
+    surface_ax.plot_trisurf(centres[:, 0], centres[:, 1], grad, cmap="RdBu_r",
+                            norm=TwoSlopeNorm(vcenter=0.0, vmin=-scale, vmax=scale), linewidth=0.1, edgecolor="k")
+    surface_ax.set_xlabel("x [m]")
+    surface_ax.set_ylabel("y [m]")
+    surface_ax.set_zlabel("dpsi/dx_e", labelpad=12)
+    span = np.ptp(case.mesh.nodes, axis=0)
+    surface_ax.set_box_aspect((3.0, max(0.3, 3.0 * span[1] / max(span[0], 1e-300)), 1.0), zoom=1.1)
+    surface_ax.view_init(elev=25, azim=-60)
+    if title is not None:
+        surface_ax.set_title(title)
+    plot_field(case, grad, figure.add_subplot(grid_spec[1]), signed=True,
+               title=f"gradient over the {domain.n_design} design elements (passive elements grey), "
+                     f"max |grad| = {scale:.3e}")
+    return figure
+
+
 def plot_field(target, values, ax=None, *, title: str | None = None, signed: bool = False, label: str | None = None):
     """Draw a design-ordered field over the elements of any mesh (e.g. the holed link).
 
@@ -114,9 +151,10 @@ def plot_field(target, values, ax=None, *, title: str | None = None, signed: boo
     if values.shape != (domain.n_design,):
         raise ValueError(f"plot_field takes a vector of shape ({domain.n_design},), got {values.shape}.")
     roles = domain.role_array()
-    field = np.where(roles == SOLID, 1.0, 0.0 if not signed else np.nan)
-    if not signed:
-        field = np.where(roles == VOID, 0.0, field)
+    if signed:  # passive elements carry no design variable: masked, drawn in the "bad" grey below
+        field = np.full(roles.shape, np.nan)
+    else:
+        field = np.where(roles == SOLID, 1.0, 0.0)
     field[np.asarray(domain.design_elements)] = values
     if signed:
         scale = float(np.nanmax(np.abs(values))) or 1.0

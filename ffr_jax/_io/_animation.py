@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._case import Case
+from .._design.body_data import marker_node_sets
 from .._scene._point_on_line import PointOnLine
 from .._scene._prescribed_point import CrankPin
 from .._simulate import solve_minimal
@@ -81,7 +82,7 @@ def animate(case: Case, x_phys, path, *, frames: int = 60, fps: float = 20.0,
 
     The elastic displacements `A(theta) Phi q` are tiny next to the rigid motion, so they are
     multiplied by `amplification` (default: a 1-2-5 number that makes the largest one about 5 % of
-    the body's length); every frame states the factor and the time. Frames are drawn with
+    the larger side of the body's bounding box); every frame states the factor and the time. Frames are drawn with
     matplotlib (Agg) and written as a GIF with Pillow, or as an MP4 through `ffmpeg` when `path`
     ends in `.mp4` (only if `ffmpeg` is on `PATH`).
 
@@ -99,24 +100,30 @@ def animate(case: Case, x_phys, path, *, frames: int = 60, fps: float = 20.0,
     from matplotlib.collections import PolyCollection
     from matplotlib.figure import Figure
 
+    # Every input is checked before the simulation runs.
     path = Path(path)
-    if frames < 1:
-        raise ValueError(f"An animation needs at least one frame, got frames={frames}.")
+    body = designed_body_index(case)
+    if not (isinstance(frames, (int, np.integer)) and frames >= 1):
+        raise ValueError(f"An animation needs a whole number of frames, at least one, got frames={frames!r}.")
+    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0.0):
+        raise ValueError(f"The frame rate must be a positive number of frames per second, got fps={fps!r}.")
+    if amplification is not None and not (math.isfinite(amplification) and amplification > 0.0):
+        raise ValueError(f"The amplification must be a positive number (or None: automatic), got {amplification}.")
     if path.suffix.lower() not in (".gif", ".mp4"):
         raise ValueError(f"Write the animation as .gif (Pillow) or .mp4 (ffmpeg), got {path.name}.")
     if path.suffix.lower() == ".mp4" and shutil.which("ffmpeg") is None:
         raise ValueError("MP4 output needs ffmpeg on PATH, which this machine lacks; write a .gif instead.")
+    x_phys = np.asarray(case.design.check(jnp.asarray(x_phys, dtype=float)))
     ts = np.linspace(case.t0, case.t1, frames)
     rigid, elastic, _ = body_motion(case, x_phys, ts, rtol=rtol, atol=atol)
     largest = float(np.max(np.linalg.norm(elastic, axis=-1)))
+    size = body_size(case.mesh)
     if amplification is None:
-        amplification = _nice(0.05 * case.mesh.length / largest) if largest > 0.0 else 1.0
-    if not amplification > 0.0:
-        raise ValueError(f"The amplification must be positive, got {amplification}.")
+        amplification = _nice(0.05 * size / largest) if largest > 0.0 else 1.0
     positions = rigid + amplification * elastic
-    quads = case.mesh.element_dofs()[:, 0::2] // 2
-    density = np.asarray(case.design.element_densities(np.asarray(x_phys, dtype=float)))
-    decorations = _decorations(case, ts, rigid + elastic)
+    quads = np.asarray(case.mesh.elements)
+    density = np.asarray(case.design.element_densities(x_phys))
+    decorations = _decorations(case, body, ts, rigid + elastic, size)
     everything = [positions.reshape(-1, 2)] + [points.reshape(-1, 2) for points, _ in decorations]
     low, high = np.min(np.concatenate(everything), axis=0), np.max(np.concatenate(everything), axis=0)
     margin = 0.08 * max(high - low)
@@ -137,7 +144,7 @@ def animate(case: Case, x_phys, path, *, frames: int = 60, fps: float = 20.0,
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     caption = ax.set_title("")
-    head = title or f"{case.mesh.nx} x {case.mesh.ny} rod"
+    head = title or f"{case.design_map.names[0]}: {case.mesh.n_elements} elements"
 
     images = []
     writer = None
@@ -184,15 +191,27 @@ def _image(figure):
     return Image.fromarray(rgba[..., :3].copy()).convert("P", palette=Image.Palette.ADAPTIVE, colors=255)
 
 
-def _decorations(case: Case, ts, nodes):
+def body_size(mesh) -> float:
+    """The larger side of the bounding box of a mesh's nodes (the scale of pictures of the body)."""
+    return float(np.max(np.ptp(np.asarray(mesh.nodes), axis=0)))
+
+
+def marker_path(case: Case, nodes, marker: int):
+    """The joint point `marker` of the designed body per frame, `(n_t, 2)`: its node, or the centroid of
+    its node set (e.g. a rim), from the node positions `nodes` `(n_t, n_nodes, 2)`."""
+    node_set = marker_node_sets(case.mesh, case.marker_nodes)[marker]
+    return nodes[:, list(node_set)].mean(axis=1)
+
+
+def _decorations(case: Case, body: int, ts, nodes, size: float):
     """Lines to draw beside the body, from the scene's joints: `[(points (n_t, k, 2), (style, lw, ms))]`.
 
     A [`CrankPin`][] is drawn as the crank from its centre to the pin; a [`PointOnLine`][] as its
     guide line (fixed) and the slider's block at the joint point of the body (`nodes`: the true
-    node positions per frame, `(n_t, n_nodes, 2)`).
+    node positions per frame, `(n_t, n_nodes, 2)`; `body`: the designed body's scene index;
+    `size`: the body's size, for the guide's reach).
     """
     scene = case.scene_template
-    body = designed_body_index(case)
     items = []
     ts = jnp.asarray(ts, dtype=float)
     for joint in scene.constraints:
@@ -203,11 +222,11 @@ def _decorations(case: Case, ts, nodes):
         elif isinstance(joint, PointOnLine):
             point, direction = np.asarray(joint.point), np.asarray(joint.direction)
             # The guide spans where the joint point travels, and a tenth of the body beyond.
-            along = (nodes[:, case.marker_nodes[joint.marker]] - point) @ direction if joint.body == body \
+            along = (marker_path(case, nodes, joint.marker) - point) @ direction if joint.body == body \
                 else np.zeros(1)
-            reach = 0.1 * case.mesh.length
+            reach = 0.1 * size
             guide = np.stack([point + (along.min() - reach) * direction, point + (along.max() + reach) * direction])
             items.append((np.broadcast_to(guide, (len(ts), 2, 2)), ("k--", 0.8, 0.0)))
             if joint.body == body:
-                items.append((nodes[:, [case.marker_nodes[joint.marker]]], ("C0s", 0.0, 8.0)))
+                items.append((marker_path(case, nodes, joint.marker)[:, None], ("C0s", 0.0, 8.0)))
     return items

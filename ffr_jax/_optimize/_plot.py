@@ -42,8 +42,9 @@ def plot_designs(case: Case, x_phys: dict, *, title: str | None = None):
     """Draw the physical densities of every designed rod of a case, one above the other, to scale.
 
     **Arguments:**
-    - `case`: a case whose designed bodies are rods ([`StructuredGrid`][] meshes, e.g.
-      `ffr_jax.cases.four_bar_two_links`); `x_phys`: `{name: (n_design_b,)}` physical densities.
+    - `case`: a case with designed bodies, e.g. `ffr_jax.cases.four_bar_two_links` (rods on a
+      [`StructuredGrid`][] are drawn as images, bodies on any other mesh element by element with
+      [`plot_field`][]); `x_phys`: `{name: (n_design_b,)}` physical densities.
     - `title`: optional figure title.
 
     **Returns:** the matplotlib `Figure`.
@@ -56,10 +57,15 @@ def plot_designs(case: Case, x_phys: dict, *, title: str | None = None):
         raise ValueError(f"plot_designs: no densities for the designed bodies {missing}.")
     fig = Figure(figsize=(10, 1.5 * len(names) + 0.7), layout="constrained")
     axes = np.atleast_1d(fig.subplots(len(names), 1))
-    width = max(case.design_map.bodies[n].mesh.length for n in names)
+    width = max(np.ptp(case.design_map.bodies[n].mesh.nodes[:, 0]) for n in names)
+    image = None
     for ax, name in zip(axes, names):
         body = case.design_map.bodies[name]
         mesh = body.mesh
+        if not isinstance(mesh, StructuredGrid):  # any other mesh: its elements drawn one by one
+            plot_field(body, np.asarray(x_phys[name]), ax,
+                       title=f"{name}: mean density {float(np.mean(x_phys[name])):.3f}")
+            continue
         field = np.asarray(body.element_densities(np.asarray(x_phys[name]))).reshape(mesh.ny, mesh.nx)
         image = ax.imshow(field, origin="lower", cmap="gray_r", vmin=0.0, vmax=1.0, interpolation="nearest",
                           aspect="auto", extent=(0.0, mesh.length, -0.5 * mesh.height, 0.5 * mesh.height))
@@ -67,7 +73,8 @@ def plot_designs(case: Case, x_phys: dict, *, title: str | None = None):
         ax.set_ylabel("y [m]")
         ax.set_title(f"{name}: mean density {float(np.mean(x_phys[name])):.3f}")
     axes[-1].set_xlabel("x [m]")
-    fig.colorbar(image, ax=list(axes), label="density", fraction=0.03, pad=0.01)
+    if image is not None:
+        fig.colorbar(image, ax=list(axes), label="density", fraction=0.03, pad=0.01)
     if title is not None:
         fig.suptitle(title)
     return fig
