@@ -141,6 +141,7 @@ def plot_field(target, values, ax=None, *, title: str | None = None, signed: boo
 
     **Returns:** the `Axes`.
     """
+    import matplotlib
     from matplotlib.collections import PolyCollection
     from matplotlib.colors import Normalize, TwoSlopeNorm
     from matplotlib.figure import Figure
@@ -165,9 +166,9 @@ def plot_field(target, values, ax=None, *, title: str | None = None, signed: boo
         lo, hi = mesh.nodes.min(axis=0), mesh.nodes.max(axis=0)
         aspect = (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-300)
         ax = Figure(figsize=(9, max(2.0, 9 * aspect + 0.8)), layout="constrained").subplots()
+    cmap = matplotlib.colormaps[cmap].with_extremes(bad="0.85")  # the grey of elements without a design variable
     cells = PolyCollection(mesh.element_coordinates(), array=np.ma.masked_invalid(field), cmap=cmap, norm=norm,
                            edgecolors="face", linewidths=0.2)
-    cells.cmap.set_bad("0.85")
     ax.add_collection(cells)
     ax.autoscale_view()
     ax.set_aspect("equal")
