@@ -12,6 +12,7 @@ from .._cli_checks import optimize_options
 from .._cli_scenes import SCENES, describe, make_case, scene_settings
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
+from ._mma import DEFAULT_MOVE
 
 # Settings that define a run: stored in its checkpoints, taken from there on --resume.
 _DEFAULTS = {
@@ -19,7 +20,7 @@ _DEFAULTS = {
     "optimizer": None,  # the scene's default (ffr_jax._cli_scenes): adam for the rod, oc for the link
     "lr": 0.02,
     "move": 0.05,
-    "mma_move": 0.2,
+    "mma_move": DEFAULT_MOVE,  # fj.MMA's default
     "frequency_min": 0.0,
     "mass_max": 0.0,
     "stop_change": 0.0,

@@ -8,18 +8,21 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 import numpy as np
 import optax
 
+from .._errors import FFRJaxError
 from ._checkpoint import Checkpoint, CheckpointError, load_checkpoint, restore_opt_state, save_checkpoint
 from ._history import History
 from ._progress import Progress
 from ._constraint import AbstractDesignConstraint
 from ._pytree import Raveled, is_flat, raveled_objective
 from ._step import as_optimizer, evaluate_constraints, make_step
+from ._step_error import step_error
 
 CHECKPOINT = "checkpoint.npz"
 LOG = "log.csv"
@@ -67,7 +70,10 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
     At the end the constraints are evaluated at the final design; if one is violated by more than
     `feasibility_tolerance` a [`ConstraintViolationWarning`][] names it (the result's `feasible` is
     then `False`). A NaN or infinite objective, constraint or design stops the run with an error
-    that names the step (the last checkpoint is kept).
+    that names the step (the last checkpoint is kept); so does an error raised inside the step's
+    compiled program (e.g. Newton's method finding that the mechanism cannot assemble with the
+    design a too large update produced), as the package's [`SimulationError`][] or
+    [`DesignError`][] with the step, the solver's reason and what to change.
 
     **Arguments:**
     - `fun`: `x -> (value, grad)` ([`make_objective`][] or any other).
@@ -163,9 +169,15 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
                 if log is not None and history.steps % checkpoint_every:  # keep the last step
                     _save(directory, history.steps, x, opt_state, history, config)
                 break
-            x_new, opt_state, info = step(x, opt_state, beta_of(k))
-            value, volume, change = float(info.value), float(info.volume), float(info.change)
-            g = np.asarray(info.constraints, dtype=float)
+            try:
+                x_new, opt_state, info = step(x, opt_state, beta_of(k))
+                value, volume, change = float(info.value), float(info.volume), float(info.change)
+                g = np.asarray(info.constraints, dtype=float)
+            except (FFRJaxError, eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, ValueError) as err:
+                clean = step_error(k, err, history.steps)  # the step and the reason, not XLA's traceback
+                if clean is None:
+                    raise
+                raise clean from None
             _check_finite(k, value, g, names, x_new, history.steps)
             x = x_new
             history = history.append(value, volume, change, g)
@@ -242,10 +254,10 @@ def _beta_schedule(beta) -> Callable:
     if beta is None:
         return lambda k: None
     if callable(beta):
-        return lambda k: jnp.asarray(beta(k), dtype=jnp.float64)
-    if not float(beta) > 0.0:
-        raise ValueError(f"The projection sharpness beta must be positive, got {beta}.")
-    return lambda k: jnp.asarray(float(beta), dtype=jnp.float64)
+        return lambda k: jnp.asarray(_check_beta(beta(k), f"optimize(beta=schedule): the schedule's beta at step {k}"),
+                                     dtype=jnp.float64)
+    value = _check_beta(beta, "optimize(beta=...)")
+    return lambda k: jnp.asarray(value, dtype=jnp.float64)
 
 
 def _save(directory, iteration, x, opt_state, history, config):
