@@ -28,7 +28,6 @@ partition is singular. Removing the radial direction as above keeps all four par
 costs one extra state per body, and is free of singularities.
 """
 
-import jax
 import jax.numpy as jnp
 
 from ._body_data import SpatialBodyData
@@ -95,8 +94,16 @@ def gravity_potential(data: SpatialBodyData, acceleration, y_b):
 
 
 def gravity_force(data: SpatialBodyData, acceleration, y_b):
-    """`Q = -dV/dy_b` of [`gravity_potential`][] `(7,)`: `Q_R = m g`, `Q_p = (d(A s)/dp)^T g`."""
-    return -jax.grad(lambda y: gravity_potential(data, acceleration, y))(y_b)
+    """`Q = -dV/dy_b` of [`gravity_potential`][] `(7,)`: `Q_R = m g`, `Q_p = 2 H^T s~ A^T g`.
+
+    (`delta(A s) = A (delta pi' x s) = -A s~ 2 H delta p`; written out rather than differentiated, so that the
+    sensitivity methods, which differentiate the forces again, see no nested derivative.)
+    """
+    p = y_b[3:7]
+    u, n = unit(p)
+    h = kinematic_matrix(u) / n
+    q_p = 2.0 * h.T @ (skew(data.first_moment) @ (rotation_matrix(p).T @ acceleration))
+    return jnp.concatenate([data.mass * acceleration, q_p])
 
 
 def momenta(data: SpatialBodyData, y_b, z_b):
