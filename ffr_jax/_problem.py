@@ -8,6 +8,7 @@ from jaxtyping import Array, Float
 
 from ._model import MinimalModel, Partition, _constraint_jacobian, choose_partition, hadamard_ratio
 from ._objective._objective import Objective, as_objective
+from ._scene._body_data import BodyData, _check_body_data
 from ._scene._references import check_references
 from ._scene._scene import Scene
 
@@ -80,6 +81,7 @@ class Problem(eqx.Module):
             raise ValueError(f"The end time t1 = {t1} must be after the start time t0 = {t0}.")
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be an ffr_jax.Scene, got {type(scene).__name__}.")
+        check_scene_data(scene)
         n = scene.n_coordinates
         positions = _vector(positions, n, "positions", scene)
         if partition is None:
@@ -139,7 +141,9 @@ class Problem(eqx.Module):
         return self.initial_state()[1]
 
     def with_scene(self, scene: Scene) -> "Problem":
-        """The same problem for other parameters `p` (a scene of the same structure)."""
+        """The same problem for other parameters `p` (a scene of the same structure); concrete body data are
+        checked as in the constructor."""
+        check_scene_data(scene)
         return eqx.tree_at(lambda p: p.scene, self, scene)
 
     def with_objective(self, objective, *, check_terminal: bool = True) -> "Problem":
@@ -147,6 +151,23 @@ class Problem(eqx.Module):
         problem = eqx.tree_at(lambda p: p.objective, self, as_objective(objective))
         _check_objective(problem, np.asarray(problem.y_r0), check_terminal)
         return problem
+
+
+def check_scene_data(scene: Scene) -> None:
+    """The body data of every planar body of `scene` pass `BodyData`'s value checks (finite, positive mass and
+    inertia, symmetric positive definite modal mass, symmetric positive semi-definite modal stiffness, ...),
+    with the body named; traced data (a design map under `jax.jit`) are let through.
+
+    `BodyData` checks its values when it is built, but data edited with `eqx.tree_at` or returned from a
+    compiled function were never built: a negative modal stiffness there made psi -4.8e152 (issue 32).
+    """
+    for k, body in enumerate(scene.bodies):
+        if not isinstance(body.data, BodyData):
+            continue
+        try:
+            _check_body_data(body.data)
+        except ValueError as err:
+            raise ValueError(f"Body {k} ({body.name!r}) of the scene: {err}") from None
 
 
 def _split(partition: Partition, v_r):

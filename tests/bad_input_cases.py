@@ -305,6 +305,72 @@ API_32 = [
     Bad("Compliance(body=-1) inside a weighted sum", lambda c: c.case.with_objective(
         fj.KineticEnergy() + 2.0 * fj.Compliance(-1)), V, r"Compliance\.body = -1 " + _NOT_A_BODY, "Problem() (objective)"),
 ]
+
+
+def _rod_with_detached_piece() -> fj.DesignedBody:
+    """The small rod (4 x 2 Q4, 2 hinged-hinged modes) and a 0.1 m square element that shares no node with
+    it: a rigid-body mode of the piece is the lowest eigenpair (omega^2 = -1e-6 of a scale 3.6e9)."""
+    grid = fj.StructuredGrid(4, 2, 1.0, 0.06)
+    nodes, elements = np.asarray(grid.nodes), np.asarray(grid.elements)
+    n = len(nodes)
+    piece = np.array([[0.4, 0.2], [0.5, 0.2], [0.5, 0.3], [0.4, 0.3]])
+    mesh = fj.QuadMesh(np.vstack([nodes, piece]), np.vstack([elements, [[n, n + 1, n + 2, n + 3]]]))
+    a, b = fj.rod_joint_nodes(4, 2)
+    return fj.DesignedBody(fj.FEModel(mesh, fj.Q4(), 0.01, 0.3), fj.DesignDomain(mesh), fj.SIMP(),
+                           fj.ModalReduction(2, fj.HingedHinged(a, b), solver=fj.DenseModes()), (a, b))
+
+
+def _detached_case(c: Ctx) -> fj.Case:
+    """The small case's problem with the detached-piece rod as its designed body (its scene's template data
+    come from the healthy rod: the data have the same shapes, so the case is accepted and the design map
+    must refuse the body)."""
+    return fj.Case(c.case.problem, fj.DesignMap({"rod": _rod_with_detached_piece()}))
+
+
+def _at_half(case, method: str | None = None):
+    """`(case, x)` at the uniform design 0.5, or `case.method(x)`."""
+    x = case.initial_design(0.5)
+    return (case, x) if method is None else getattr(case, method)(x)
+
+
+def _negative_stiffness(c: Ctx):
+    scene = c.case.problem.scene
+    return eqx.tree_at(lambda s: s.bodies[0].data.modal_stiffness, scene, -scene.bodies[0].data.modal_stiffness)
+
+
+_MECHANISM = "found a rigid-body or mechanism mode"
+API_32 += [
+    # Silently wrong before (psi 5.3e-12 instead of 9.3e-3; case.frequencies() alone refused): the modal check
+    # guards the modes as well as the eigenvalues, so every path that builds body data refuses the body.
+    Bad("detached piece: uniform_body_data()", lambda c: _rod_with_detached_piece().uniform_body_data(), DE,
+        _MECHANISM, "modal check (compiled)"),
+    Bad("detached piece: case.body_data(x)", lambda c: _at_half(_detached_case(c), "body_data"), DE, _MECHANISM,
+        "modal check"),
+    Bad("detached piece: fj.objective(case, x)", lambda c: fj.objective(*_at_half(_detached_case(c))), DE, _MECHANISM,
+        "modal check (objective program)"),
+    # psi = -4.8e152 before: data edited with eqx.tree_at skip BodyData's own checks.
+    Bad("negative modal stiffness (eqx.tree_at) -> Problem.with_scene", lambda c: c.case.problem.with_scene(
+        _negative_stiffness(c)), V, r"Body 0 \('rod'\) of the scene: BodyData.modal_stiffness must be positive "
+        "semi-definite", "Problem.with_scene()"),
+    Bad("negative modal stiffness (eqx.tree_at) -> Problem()", lambda c: fj.Problem(
+        _negative_stiffness(c), 0.1, positions=c.case.problem.y_r0, objective=fj.Compliance(0)), V,
+        "modal_stiffness must be positive semi-definite", "Problem()"),
+]
+_BETA = "beta must be a finite positive number"
+API_32 += [
+    # NaN psi and gradient before (beta = inf passed the check `beta <= 0`); fj.optimize(beta=inf) never moved.
+    Bad("HeavisideProjection beta = inf", lambda c: fj.HeavisideProjection(0.5)(c.x, INF), V, _BETA,
+        "HeavisideProjection.__call__"),
+    Bad("HeavisideProjection beta = nan", lambda c: fj.HeavisideProjection(0.5)(c.x, NAN), V, _BETA,
+        "HeavisideProjection.__call__"),
+    Bad("HeavisideProjection beta = inf under jax.jit + clean_errors", lambda c: fj.clean_errors(jax.jit(
+        fj.HeavisideProjection(0.5)))(c.x, INF), DE, "^The projection sharpness " + _BETA, "compiled check"),
+    Bad("beta_continuation(1, inf)", lambda c: fj.beta_continuation(1.0, INF, 10), V, "finite start, stop",
+        "beta_continuation()"),
+    Bad("fj.optimize(beta=inf)", lambda c: fj.optimize(lambda x: (jnp.sum(x), jnp.ones_like(x)), c.x, fj.MMA(),
+                                                       iterations=1, beta=INF), V, r"optimize\(beta=...\).*" + _BETA,
+        "optimize() entry"),
+]
 API += API_32
 
 # Every command line has the small mesh; the bad option is what fails, before anything compiles.

@@ -12,6 +12,7 @@ import abc
 
 import equinox as eqx
 
+from .._errors import clean_errors
 from .._scene._body_data import BodyData
 from .._scene._scene import Scene
 from .._scene._stiffening import GeometricStiffening
@@ -182,16 +183,19 @@ class DesignMap(AbstractDesignMap):
         return scene
 
     # --- per body ---------------------------------------------------------------------------------
+    @clean_errors  # a body refused by the modal check: a DesignError, not equinox's runtime error
     def modes(self, designs) -> ModalBasis | dict[str, ModalBasis]:
         """The modal basis of each designed body (in the form of `designs`)."""
         by_body = self._checked(designs)
         return self._like(designs, {n: b.modes(by_body[n]) for n, b in self.bodies.items()})
 
+    @clean_errors
     def frequencies(self, designs):
         """Retained natural frequencies in Hz of each designed body, `(n_modes,)` each (in the form of `designs`)."""
         by_body = self._checked(designs)
         return self._like(designs, {n: b.frequencies(by_body[n]) for n, b in self.bodies.items()})
 
+    @clean_errors
     def body_data(self, designs) -> BodyData | dict[str, BodyData]:
         """The body data of each designed body (in the form of `designs`)."""
         by_body = self._checked(designs)

@@ -5,7 +5,8 @@
 
 import equinox as eqx
 
-from .._scene._body_data import BodyData
+from .._errors import clean_errors
+from .._scene._body_data import BodyData, _check_body_data
 from .assembly import ElementOperator, FEModel
 from .body_data import body_data, marker_node_sets
 from .domain import DesignDomain
@@ -116,7 +117,9 @@ class DesignedBody(eqx.Module):
     def uniform_body_data(self, value: float = 0.5) -> BodyData:
         """Body data of the uniform design `x_e = value`, compiled once per body structure (templates
         of scenes are built from it)."""
-        return _compiled_body_data(self, self.initial_design(value))
+        data = clean_errors(_compiled_body_data)(self, self.initial_design(value))
+        _check_body_data(data)  # computed under jit, where BodyData's own value checks cannot run
+        return data
 
 
 @eqx.filter_jit

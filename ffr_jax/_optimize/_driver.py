@@ -19,6 +19,7 @@ from .._errors import FFRJaxError
 from ._checkpoint import Checkpoint, CheckpointError, load_checkpoint, restore_opt_state, save_checkpoint
 from ._history import History
 from ._progress import Progress
+from ._projection import _check_beta
 from ._constraint import AbstractDesignConstraint
 from ._pytree import Raveled, is_flat, raveled_objective
 from ._step import as_optimizer, evaluate_constraints, make_step

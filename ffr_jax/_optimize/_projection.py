@@ -1,10 +1,13 @@
 """Heaviside (threshold) projection of the filtered densities, and its continuation in `beta`."""
 
+import math
 from collections.abc import Callable
 
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._checks import is_traced
+from .._errors import DesignError, error_if
 from .._typing import Design, Scalar
 
 
@@ -54,13 +57,31 @@ class HeavisideProjection(eqx.Module):
 
     def __call__(self, x_filtered: Design, beta: Scalar | float) -> Design:
         """Physical densities `x_min + (1 - x_min) P_beta(u)` of filtered densities `(n_design,)`."""
-        beta = eqx.error_if(jnp.asarray(beta, dtype=x_filtered.dtype), jnp.asarray(beta) <= 0.0,
-                            "The projection sharpness beta must be positive.")
+        if not is_traced(beta):
+            _check_beta(beta, "HeavisideProjection(...)(x, beta)")
+        beta = jnp.asarray(beta, dtype=x_filtered.dtype)
+        # A traced beta (a schedule's value inside a compiled step): inf or nan would make P_beta NaN.
+        beta = error_if(beta, ~(beta > 0.0) | ~jnp.isfinite(beta), BETA_MESSAGE, DesignError)
         u = (x_filtered - self.x_min) / (1.0 - self.x_min)
         a = jnp.tanh(beta * self.eta)
         p = (a + jnp.tanh(beta * (u - self.eta))) / (a + jnp.tanh(beta * (1.0 - self.eta)))
         # Round-off in H x may leave u a hair outside [0, 1]; the bounds are exact.
         return jnp.clip(self.x_min + (1.0 - self.x_min) * p, self.x_min, 1.0)
+
+
+BETA_MESSAGE = ("The projection sharpness beta must be a finite positive number (at beta = inf the projection "
+                "P_beta is NaN, tanh(inf) / tanh(inf)); continuation schedules stop at a finite beta_max such as 32.")
+
+
+def _check_beta(beta, where: str) -> float:
+    """A concrete `beta`: a finite number `> 0`, or a `ValueError` naming `where`."""
+    try:
+        value = float(beta)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: beta must be a number, got {beta!r}.") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{where}: beta = {value}. {BETA_MESSAGE}")
+    return value
 
 
 def beta_continuation(start: float, stop: float, every: int, factor: float = 2.0) -> Callable[[int], float]:
@@ -80,6 +101,9 @@ def beta_continuation(start: float, stop: float, every: int, factor: float = 2.0
     schedule = fj.beta_continuation(1.0, 32.0, every=20)   # 1, 2, 4, ..., 32 from step 100 on
     ```
     """
+    if not (math.isfinite(float(start)) and math.isfinite(float(stop)) and math.isfinite(float(factor))):
+        raise ValueError(f"beta continuation needs finite start, stop and factor, got start={start}, stop={stop}, "
+                         f"factor={factor}. {BETA_MESSAGE}")
     if not 0.0 < start <= stop:
         raise ValueError(f"beta continuation needs 0 < start <= stop, got start={start}, stop={stop}.")
     if every < 1:

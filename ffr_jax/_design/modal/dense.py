@@ -8,7 +8,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..assembly import FEModel, dense_matrix
-from .base import AbstractModalSolver, check_modes, check_size
+from .base import AbstractModalSolver, check_modes, check_size, stiffness_scale
 from .interface import ReductionLayout
 
 
@@ -89,5 +89,5 @@ class DenseModes(AbstractModalSolver):
             x_i = -jnp.linalg.solve(k[ii], k[np.ix_(interior, boundary)] @ u_b)
             psi = jnp.zeros((model.n_dof, layout.n_static), dtype=x_i.dtype).at[interior].set(x_i).at[boundary].set(u_b)
             modes = jnp.concatenate([modes, psi], axis=1)
-        lam = check_modes(lam, modes, "Dense modal analysis")
+        lam, modes = check_modes(lam, modes, "Dense modal analysis", stiffness_scale(model, youngs, densities))
         return lam, modes

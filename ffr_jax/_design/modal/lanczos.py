@@ -51,7 +51,7 @@ import scipy.linalg
 import scipy.sparse.linalg as spla
 
 from ..assembly import FEModel, csc_matrices
-from .base import AbstractModalSolver, check_modes, check_size
+from .base import AbstractModalSolver, check_modes, check_size, stiffness_scale
 from .interface import ReductionLayout
 
 
@@ -240,5 +240,5 @@ class LanczosModes(AbstractModalSolver):
         lam, phi, psi = _lanczos_basis(layout, n_modes, youngs, densities, model.unit_stiffness, model.unit_mass,
                                        model.element_dofs)
         modes = jnp.concatenate([phi, psi], axis=1) if layout.n_static else phi
-        lam = check_modes(lam, modes, "Lanczos modal analysis")
+        lam, modes = check_modes(lam, modes, "Lanczos modal analysis", stiffness_scale(model, youngs, densities))
         return lam, modes
