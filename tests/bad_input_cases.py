@@ -371,6 +371,14 @@ API_32 += [
                                                        iterations=1, beta=INF), V, r"optimize\(beta=...\).*" + _BETA,
         "optimize() entry"),
 ]
+API_32 += [
+    # A gradient 3.6x off without a word before: steps below 100 rtol (the noise floor) are refused at trace time.
+    Bad("FiniteDifferences(step=1e-12) at rtol 1e-10", lambda c: c.fd(c.x, step=1e-12), V,
+        r"step=1e-12\) is below the noise floor .* at least 100 rtol = 1e-08", "value_and_grad() trace"),
+    Bad("FiniteDifferences(step=1e-5) at rtol 1e-6", lambda c: fj.value_and_grad(
+        c.case, c.x, fj.FiniteDifferences(step=1e-5), rtol=1e-6), V, "noise floor .* at least 100 rtol = 0.0001",
+        "value_and_grad() trace"),
+]
 API += API_32
 
 # Every command line has the small mesh; the bad option is what fails, before anything compiles.

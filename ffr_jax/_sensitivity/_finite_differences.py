@@ -7,7 +7,7 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import integer, positive
+from .._checks import integer, is_traced, positive
 from ._base import AbstractSensitivity, psi_of
 
 
@@ -34,6 +34,13 @@ def _lower_bounds(case, x):
     return np.full(jnp.shape(x), case.material.x_min)
 
 
+# The smallest step, in units of the forward rtol. psi of each solve has a relative error of about rtol,
+# so a difference quotient carries a noise of about rtol |psi| / h (per unit density); h >= 100 rtol keeps it
+# below 1 % of |psi|. (The truncation error of the central quotient, ~h^2, is smallest at h ~ rtol^(1/3);
+# 1e-12 at rtol 1e-10 gave a gradient 3.6x off, issue 32.)
+NOISE_FLOOR = 100.0
+
+
 class FiniteDifferences(AbstractSensitivity):
     """Finite differences of `psi` in the design variables, central where the bounds allow:
 
@@ -46,7 +53,8 @@ class FiniteDifferences(AbstractSensitivity):
     **Fields:**
     - `step`: the perturbation `h > 0` (the paper used 0.1; a converged one is ~1e-4…1e-6, with
       the forward tolerance far below `h^2`). It must be below `(1 - x_min) / 2`, so that one side
-      always fits.
+      always fits, and at least `100 rtol` (the noise floor: each psi carries a relative error of
+      about `rtol`, so the quotient carries about `rtol |psi| / h`; a smaller step is refused).
     - `entries`: optional indices of the design variables to difference (default: all); other
       entries of the returned gradient are NaN so that they cannot be mistaken for values. For a
       dict design the indices count in the flattened design (`jax.flatten_util.ravel_pytree`:
@@ -77,6 +85,14 @@ class FiniteDifferences(AbstractSensitivity):
         if not self.step < (hi - widest) / 2:
             raise ValueError(f"FiniteDifferences(step={self.step}) must be below (1 - x_min) / 2 = {(hi - widest) / 2:g}, "
                              "so that every density can be perturbed to one side inside [x_min, 1].")
+        if not is_traced(rtol) and self.step < NOISE_FLOOR * float(rtol):
+            raise ValueError(
+                f"FiniteDifferences(step={self.step:g}) is below the noise floor of the forward solves: at "
+                f"rtol = {float(rtol):g} each psi carries a relative error of about rtol, so a difference quotient "
+                f"carries about rtol |psi| / step = {float(rtol) / self.step:.3g} |psi| of noise per unit density. "
+                f"Use a step of at least {NOISE_FLOOR:g} rtol = {NOISE_FLOOR * float(rtol):g} (about 1e-4 to 1e-6 with "
+                "the default rtol 1e-10), or a tighter rtol."
+            )
         if self.entries is not None and max(self.entries) >= x.size:
             raise ValueError(f"FiniteDifferences(entries=...) holds index {max(self.entries)}, but the design has "
                              f"{x.size} variables (indices 0 to {x.size - 1}).")
