@@ -18,6 +18,7 @@ import equinox as eqx
 
 from . import _checks
 from ._case import Case
+from ._compiled import Program, logger
 from ._errors import clean_errors
 from ._problem import Problem
 from ._scene._scene import Scene
@@ -28,6 +29,7 @@ from ._sensitivity._base import AbstractSensitivity
 from ._sensitivity._direct import Direct
 from ._sensitivity._discrete_adjoint import DiscreteAdjoint
 from ._sensitivity._finite_differences import FiniteDifferences
+from ._sensitivity._route import choose_route
 from ._simulate import Trajectory, simulate as simulate_redundant, solve_minimal
 from ._typing import DesignsInput
 
@@ -94,8 +96,7 @@ def _checked_design(case, x):
 
 
 # --- compiled programs ------------------------------------------------------------------------
-@eqx.filter_jit
-def _simulate_problem(problem, solver, rtol, atol, ts, dense, max_steps, adjoint, dt0):
+def _simulate_problem_fn(problem, solver, rtol, atol, ts, dense, max_steps, adjoint, dt0):
     obj = problem.objective
     return solve_minimal(
         problem.model, problem.scene, problem.t0, problem.t1, problem.y0, problem.z0,
@@ -104,24 +105,45 @@ def _simulate_problem(problem, solver, rtol, atol, ts, dense, max_steps, adjoint
     )
 
 
-@eqx.filter_jit
-def _simulate_case(case, x, solver, rtol, atol, ts, dense, max_steps, adjoint):
-    return _simulate_problem(case.problem_for(case.check(x)), solver, rtol, atol, ts, dense, max_steps, adjoint, None)
+def _simulate_case_fn(case, x, solver, rtol, atol, ts, dense, max_steps, adjoint):
+    return _simulate_problem_fn(case.problem_for(case.check(x)), solver, rtol, atol, ts, dense, max_steps, adjoint, None)
 
 
-@eqx.filter_jit
-def _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps):
+def _value_and_grad_problem_fn(problem, method, rtol, atol, solver, max_steps):
     return method.value_and_grad_problem(problem, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps)
 
 
-@eqx.filter_jit
-def _value_and_grad_design(case, x, method, rtol, atol, solver, max_steps):
+def _value_and_grad_design_fn(case, x, method, rtol, atol, solver, max_steps):
     return method.value_and_grad_design(case, case.check(x), rtol=rtol, atol=atol, solver=solver, max_steps=max_steps)
 
 
-@eqx.filter_jit
-def _value_and_grad_scene(problem, scene, method, rtol, atol, solver, max_steps):
+def _value_and_grad_scene_fn(problem, scene, method, rtol, atol, solver, max_steps):
     return method.value_and_grad_scene(problem, scene, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps)
+
+
+_simulate_problem = Program(_simulate_problem_fn, "the simulation of a problem")
+_simulate_case = Program(_simulate_case_fn, "the simulation of a case")
+_value_and_grad_problem = Program(_value_and_grad_problem_fn, "the gradient of a problem")
+_value_and_grad_design = Program(_value_and_grad_design_fn, "the design gradient of a case")
+_value_and_grad_scene = Program(_value_and_grad_scene_fn, "the scene gradient of a problem")
+
+
+def _route(target, method, solver, rtol, atol):
+    """`(method, solver, rtol, atol, detail)` of a gradient: the default route where no method (and no
+    solver) is given ([`choose_route`][]), else the given method with the paper's tolerances."""
+    if method is None and solver is None:
+        route = choose_route(target)
+        logger.debug("value_and_grad: %s", route.reason)
+        method, solver, detail = route.method, route.solver, route.reason
+        default_rtol, default_atol = route.rtol, route.atol
+    else:
+        method = sensitivity_method("adjoint" if method is None else method)
+        detail, default_rtol, default_atol = type(method).__name__, 1e-10, 1e-12
+    if rtol is None:
+        rtol, atol = default_rtol, default_atol if atol is None else atol
+    elif atol is None:
+        atol = rtol / 100
+    return method, solver, rtol, atol, detail
 
 
 # --- public functions -------------------------------------------------------------------------
@@ -193,8 +215,8 @@ def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, ato
 
 
 @clean_errors
-def value_and_grad(target, x: DesignsInput | None = None, method: str | AbstractSensitivity = "adjoint", *,
-                   rtol: float = 1e-10, atol: float = 1e-12, solver: diffrax.AbstractSolver | None = None,
+def value_and_grad(target, x: DesignsInput | None = None, method: str | AbstractSensitivity | None = None, *,
+                   rtol: float | None = None, atol: float | None = None, solver: diffrax.AbstractSolver | None = None,
                    max_steps: int = 200_000, check: bool = False):
     """`(psi, grad psi)` of a case with respect to its design, or of a problem with respect to its arrays.
 
@@ -202,15 +224,21 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
     - `target`: a case such as `ffr_jax.cases.slider_crank()` followed by `x`, its designs: a
       dict `{body name: (n_design_b,) densities}` in `[x_min, 1]`, or a flat `(n_design,)` array
       when the case designs one body; or a [`Problem`][] (no `x`).
-    - `method`: `"adjoint"` (the paper's adjoint variable method, default), `"autodiff"`
+    - `method`: `None` (default): the route [`choose_route`][] picks from the retained frequencies and
+      the time span — the discrete adjoint of Rodas5P at rtol 1e-7 where an explicit solver would sit
+      at its stability limit (the reference case: about 1 s, 2.5e-8 of the largest entry from a tight
+      reference), else the paper's adjoint with Dopri8 at rtol 1e-10; the route is logged at INFO on
+      the `"ffr_jax"` logger. Or `"adjoint"` (the paper's adjoint variable method), `"autodiff"`
       (`jax.grad` through diffrax), `"backsolve"` (diffrax `BacksolveAdjoint`), `"direct"`
       (forward sensitivities), `"fd"` (central differences, designs only), `"discrete-adjoint"`
       (the discrete adjoint of a Rosenbrock forward solve, `ffr_jax.DiscreteAdjoint`: the derivative
       of the computed psi at about half the cost of autodiff through it; `solver` defaults to
       `ffr_jax.Rodas5P()` for it), or a configured method object such as
       `ffr_jax.Adjoint(rtol=1e-9, atol=1e-11)` or `ffr_jax.FiniteDifferences(step=1e-4)`.
-    - `rtol`, `atol`: forward tolerances (the paper's 1e-10 / 1e-12 by default).
-    - `solver`: diffrax solver of the forward solve (default `Dopri8()`); the adjoint and backsolve
+    - `rtol`, `atol`: forward tolerances (default: the route's with `method=None`, else the paper's
+      1e-10 / 1e-12; `atol` defaults to `rtol / 100` where only `rtol` is given).
+    - `solver`: diffrax solver of the forward solve (default: the route's with `method=None`, else
+      `Dopri8()`; a `solver` given with `method=None` takes the paper's adjoint); the adjoint and backsolve
       methods integrate backward with the same solver when one is given, else with `Dopri8()`.
       The stiff route, `solver=ffr_jax.Rodas5P()` (a linearly implicit Rosenbrock method, not
       limited by the highest retained frequency), works with every method (tests/test_stiff_route.py).
@@ -240,16 +268,18 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
     ```
     """
     _check_target(target)
+    if isinstance(target, Problem) and isinstance(x, (str, AbstractSensitivity)):
+        x, method = None, x  # value_and_grad(problem, "autodiff")
+    method, solver, rtol, atol, detail = _route(target, method, solver, rtol, atol)
     _check_options("ffr_jax.value_and_grad", rtol, atol, max_steps)
     if isinstance(target, Problem):
         problem, method = _problem_and_method(target, x, method)
         if check:
             raise ValueError("value_and_grad(problem, check=True): the gradient check differences a design; "
                              "build a Case (problem + design map) to check a design gradient.")
-        return _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps)
-    method = sensitivity_method(method)
+        return _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps, detail=detail)
     x = _design(target, x, "value_and_grad")
-    psi, grad = _value_and_grad_design(target, x, method, rtol, atol, solver, max_steps)
+    psi, grad = _value_and_grad_design(target, x, method, rtol, atol, solver, max_steps, detail=detail)
     if check:
         from ._gradient_check import check_gradient
 
