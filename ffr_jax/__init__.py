@@ -67,6 +67,7 @@ from ._sensitivity._base import AbstractSensitivity as AbstractSensitivity
 from ._sensitivity._direct import Direct as Direct
 from ._sensitivity._discrete_adjoint import DiscreteAdjoint as DiscreteAdjoint
 from ._sensitivity._finite_differences import FiniteDifferences as FiniteDifferences
+from ._sensitivity._route import Route as Route, choose_route as choose_route
 from ._sharding import sharded_map as sharded_map
 from ._solver import Rodas4 as Rodas4, Rodas5P as Rodas5P
 from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state
