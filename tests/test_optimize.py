@@ -690,10 +690,12 @@ def test_optax_optimizers_refuse_other_constraints():
 
 def test_progress_is_plain_lines_when_not_a_terminal(capsys):
     # Under pytest standard error is not a terminal: no tqdm bar with carriage returns, a line per
-    # tenth of the run with the last step's numbers.
+    # tenth of the run with the last step's numbers, after one line before the first step saying it compiles
+    # (so that a run says something from its start: issue 28).
     run(None, "mma", 20, extra=True, progress=True)
     err = capsys.readouterr().err
-    lines = err.splitlines()
+    first, *lines = err.splitlines()
+    assert first == "step 1/20: compiling the step (first call)...", first
     assert "\r" not in err and len(lines) == 10, err
     assert lines[-1].startswith("100%") and "20/20" in lines[-1] and "psi" in lines[-1] and "max g" in lines[-1]
 

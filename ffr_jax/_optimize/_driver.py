@@ -164,6 +164,8 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
         log = open(directory / LOG, "a")
     step = make_step(fun, optimizer, constraints)
     bar = Progress(iterations, history.steps, progress)
+    if history.steps < iterations:
+        bar.compiling()
     try:
         for k in range(history.steps, iterations):
             if stop_change is not None and history.steps and history.change[-1] <= stop_change:

@@ -24,6 +24,17 @@ class Progress:
         self.bar = tqdm(total=total, initial=initial, file=sys.stderr, unit="step", dynamic_ncols=True,
                         disable=not self.tty, leave=True)
 
+    def compiling(self) -> None:
+        """Say, before the first step of a run, that it compiles (the first step of a process takes
+        from seconds to minutes, all of it tracing and compiling; later steps reuse the program)."""
+        if not self.enabled:
+            return
+        if self.tty:
+            self.bar.set_postfix_str("compiling the step (first call)...", refresh=True)
+            return
+        sys.stderr.write(f"step {self.initial + 1}/{self.total}: compiling the step (first call)...\n")
+        sys.stderr.flush()
+
     def update(self, done: int, postfix: str) -> None:
         """Record that `done` steps are complete; `postfix`: the last step's numbers."""
         if not self.enabled:
