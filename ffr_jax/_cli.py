@@ -10,13 +10,14 @@ from pathlib import Path
 import numpy as np
 
 from . import _cli_checks
-from ._cli_scenes import SCENE_DEFAULTS, SCENES, describe, make_case, scene_settings
+from ._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_case, make_case, scene_settings
 from ._io._cli import add_io_parsers
 from ._optimize._cli import add_optimize_parser
 
 
 def _add_case_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("case", choices=list(SCENES), help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items()))
+    p.add_argument("case", type=case_name(), metavar="CASE",
+                   help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items()) + "; " + USER_CASE_HELP)
     p.add_argument("--nx", type=int, default=None, help="slider-crank: elements along the rod (default 100)")
     p.add_argument("--ny", type=int, default=None, help="slider-crank: elements across the rod, even (default 6)")
     p.add_argument("--mesh-size", type=float, default=None,
@@ -59,7 +60,7 @@ def _gradient(args) -> int:
     from ffr_jax._cacheable import cache_events, compile_value_and_grad
 
     if args.atol is None:
-        args.atol = SCENE_DEFAULTS[args.case]["atol"]
+        args.atol = scene_settings(args.case, {})["atol"]
     _cli_checks.gradient_options(args)
     case = _make_case(args)
     x = case.initial_design(args.value)
@@ -80,8 +81,9 @@ def _gradient(args) -> int:
                                             export_dir=None if directory is None else directory / "programs")
     compile_s = info["compile_s"]
     compiled = fj.clean_errors(compiled)  # run-time errors with the package's message
+    # One solve gives psi and the gradient; --repeat N times N - 1 more calls of the compiled program.
     runs = []
-    for _ in range(2):
+    for _ in range(args.repeat):
         start = time.perf_counter()
         psi, grad = jax.block_until_ready(compiled(x))
         runs.append(time.perf_counter() - start)
@@ -90,9 +92,10 @@ def _gradient(args) -> int:
     if not (np.isfinite(psi) and np.all(np.isfinite(grad))):
         raise RuntimeError(f"psi = {psi} or the gradient is not finite ({np.count_nonzero(~np.isfinite(grad))} "
                            "entries); nothing is written. Tighten --rtol/--atol or report the case.")
+    later = float(np.median(runs[1:])) if len(runs) > 1 else None
     timings = {"compile_s": compile_s, "first_call_s": runs[0], "compile_and_first_call_s": compile_s + runs[0],
-               "second_call_s": runs[1], "persistent_cache": cache,
-               "traced_program_loaded": info["exported_loaded"]}
+               "second_call_s": runs[1] if len(runs) > 1 else None, "later_calls_median_s": later, "calls": len(runs),
+               "persistent_cache": cache, "traced_program_loaded": info["exported_loaded"]}
 
     print(f"psi = {psi:.10e}")
     rod = args.case == "slider-crank"
@@ -111,8 +114,10 @@ def _gradient(args) -> int:
             print(f"  row {row['row']}  y in [{row['y_min']:+.4f}, {row['y_max']:+.4f}] m: "
                   f"{row['n_negative']:4d} negative, {row['n_positive']:4d} positive, mean {row['mean']:+.3e}  "
                   f"[{row['sign']}]")
-    print(f"timings: compile {compile_s:.2f} s, compile + first call {timings['compile_and_first_call_s']:.2f} s, "
-          f"second call {runs[1]:.3f} s")
+    print(f"timings: compile {compile_s:.2f} s, first call {runs[0]:.3f} s (the one solve; a first call also pays the "
+          f"compiled program's one-time setup), compile + first call {timings['compile_and_first_call_s']:.2f} s"
+          + (f", {len(runs) - 1} later call(s) median {later:.3f} s" if later is not None else
+             " (--repeat N times N - 1 more calls)"))
     print(f"compilation cache: scene-gradient program {'loaded' if info['exported_loaded'] else 'traced'}; "
           f"XLA programs: {cache['cache_hits']} loaded, {cache['cache_misses']} compiled")
 
@@ -131,8 +136,8 @@ def _gradient(args) -> int:
             record["case"].update(nx=case.mesh.nx, ny=case.mesh.ny)
             record["grid_shape"] = [case.mesh.ny, case.mesh.nx - 2]
         else:
-            record["case"]["mesh_size"] = args.mesh_size if args.mesh_size is not None else \
-                SCENE_DEFAULTS[args.case]["mesh_size"]
+            if not is_user_case(args.case):
+                record["case"]["mesh_size"] = scene_settings(args.case, {"mesh_size": args.mesh_size})["mesh_size"]
             record["design_elements"] = np.asarray(case.design.domain.design_elements).tolist()
         text = json.dumps(_cli_checks.finite_record(record, f"--json {args.json}"), indent=1, allow_nan=False)
         Path(args.json).write_text(text)
@@ -142,7 +147,8 @@ def _gradient(args) -> int:
             figure = fj.plot_gradient(case, grad, title=f"dpsi/dx ({args.method}), {case.mesh.nx} x {case.mesh.ny} "
                                                         f"rod, x = {args.value}, psi = {psi:.6e}")
         else:
-            figure = fj.plot_field(case, grad, signed=True, title=f"dpsi/dx ({args.method}), link coupler, "
+            body = "link coupler" if args.case == "link-four-bar" else f"{args.case}, body {case.design_map.names[0]}"
+            figure = fj.plot_field(case, grad, signed=True, title=f"dpsi/dx ({args.method}), {body}, "
                                                                   f"x = {args.value}, psi = {psi:.6e}").figure
         figure.savefig(args.plot, dpi=150)
         print(f"wrote {args.plot}")
@@ -170,6 +176,9 @@ def _add_gradient_parser(sub) -> None:
                    help="absolute tolerance of the backward solve (default 1e-10; keep it well below |psi|)")
     p.add_argument("--fd-step", type=float, default=None,
                    help="finite-difference step for --method fd (default: ffr_jax.FiniteDifferences's)")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="calls of the compiled gradient to time (default 1: one solve; 2 or more also times calls "
+                        "after the first)")
     p.add_argument("--json", metavar="PATH", help="write psi, grad and timings as JSON")
     p.add_argument("--plot", metavar="PATH", help="draw the gradient field over the designed body (PNG, PDF, ...)")
     p.set_defaults(func=_gradient)

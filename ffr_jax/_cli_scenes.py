@@ -1,4 +1,9 @@
-"""The scenes of the `ffr-jax` command line: their options, defaults and cases."""
+"""The scenes of the `ffr-jax` command line: their options, defaults and cases, and a user's own case
+given as `my_case.py:make_case` (a Python file and a function in it that returns an `ffr_jax.Case`)."""
+
+import functools
+import importlib.util
+from pathlib import Path
 
 SCENES = {
     "slider-crank": "the paper's reference case: a flexible rod driven by a crank, its end sliding on a line",
@@ -15,12 +20,72 @@ SCENE_DEFAULTS = {
 }
 
 
+# A user's case takes no scene options (its function sets the mesh, modes and times itself).
+USER_CASE_DEFAULTS = {"atol": 1e-12, "optimizer": "mma"}
+USER_CASE_HELP = ("or a user's case FILE.py:FUNCTION, a Python file with a function of no arguments that returns an "
+                  "ffr_jax.Case with one designed body (e.g. my_case.py:make_case)")
+
+
+def is_user_case(name: str) -> bool:
+    """Whether a case argument names a user's case, `FILE.py:FUNCTION`."""
+    path, _, function = name.rpartition(":")
+    return path.endswith(".py") and function.isidentifier()
+
+
+def case_name(extra: tuple = ()):
+    """An argparse `type` for the case argument: a scene of [`SCENES`][] (or of `extra`) or `FILE.py:FUNCTION`."""
+    import argparse
+
+    def check(name: str) -> str:
+        if name in SCENES or name in extra or is_user_case(name):
+            return name
+        raise argparse.ArgumentTypeError(
+            f"invalid case {name!r}: choose one of {', '.join([*SCENES, *extra])}, or give a user's case as "
+            "FILE.py:FUNCTION (e.g. my_case.py:make_case)")
+
+    return check
+
+
+def load_user_case(name: str):
+    """The case that `FUNCTION()` of `FILE.py` returns, for `name = "FILE.py:FUNCTION"` (each file and
+    function loaded once per process, so the commands run in one process share its compiled programs).
+
+    Raises `ValueError` when the file, the function or the returned case is not what the CLI needs.
+    """
+    path, _, function = name.rpartition(":")
+    resolved = Path(path).expanduser().resolve()
+    if not resolved.is_file():
+        raise ValueError(f"No user case file {path}: give FILE.py:FUNCTION with an existing Python file.")
+    return _load_user_case(str(resolved), resolved.stat().st_mtime_ns, function, name)
+
+
+@functools.cache
+def _load_user_case(path: str, mtime_ns: int, function: str, name: str):
+    import ffr_jax as fj
+
+    spec = importlib.util.spec_from_file_location(f"ffr_jax_user_case_{abs(hash((path, mtime_ns)))}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    make = getattr(module, function, None)
+    if not callable(make):
+        raise ValueError(f"{name}: {Path(path).name} defines no function {function!r} (define `def {function}(): "
+                         "return case`).")
+    case = make()
+    if not isinstance(case, fj.Case):
+        raise ValueError(f"{name}: {function}() returned {type(case).__name__}, not an ffr_jax.Case (e.g. "
+                         "fj.cases.slider_crank(rod=...)).")
+    if len(case.design_map.names) != 1:
+        raise ValueError(f"{name}: the commands take a case with one designed body; this one designs "
+                         f"{list(case.design_map.names)}.")
+    return case
+
+
 def scene_settings(scene: str, given: dict) -> dict:
     """The scene's settings: its defaults, overridden by the options `given` (`None` = not given).
 
     Raises `ValueError` for an option the scene does not have (e.g. `--nx` for link-four-bar).
     """
-    defaults = SCENE_DEFAULTS[scene]
+    defaults = USER_CASE_DEFAULTS if is_user_case(scene) else SCENE_DEFAULTS[scene]
     foreign = sorted(k for k, v in given.items() if v is not None and k not in defaults
                      and any(k in other for other in SCENE_DEFAULTS.values()))
     if foreign:
@@ -33,6 +98,8 @@ def make_case(scene: str, settings: dict):
     """The case of a CLI scene with settings from [`scene_settings`][]."""
     import ffr_jax as fj
 
+    if is_user_case(scene):
+        return load_user_case(scene)
     if scene == "slider-crank":
         return fj.cases.slider_crank(nx=settings["nx"], ny=settings["ny"], n_modes=settings["modes"], t1=settings["t1"])
     return fj.cases.link_four_bar(settings["t1"], mesh_size=settings["mesh_size"], n_modes=settings["modes"])
@@ -41,6 +108,10 @@ def make_case(scene: str, settings: dict):
 def describe(scene: str, case) -> str:
     """One line naming the scene's designed body and its size."""
     body = case.design
+    if is_user_case(scene):
+        return (f"{scene}: body {case.design_map.names[0]!r}, {body.mesh.n_elements} "
+                f"{type(body.model.element).__name__} elements, {case.n_design} design variables, "
+                f"{body.reduction.n_q(body.mesh)} shape vectors")
     if scene == "slider-crank":
         return f"slider-crank rod: {case.mesh.nx} x {case.mesh.ny} Q4 elements, {case.n_design} design variables"
     return (f"link-four-bar coupler: {body.mesh.n_elements} {type(body.model.element).__name__} elements "

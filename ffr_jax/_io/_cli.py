@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._cli_scenes import USER_CASE_HELP, case_name, is_user_case, load_user_case
+
 _CASE_DEFAULTS = {"nx": 100, "ny": 6, "modes": 6, "t1": 3.0}
 
 
@@ -24,7 +26,8 @@ def slider_crank_case(nx: int, ny: int, modes: int, t1: float):
 
 
 def _add_design_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("case", choices=["slider-crank"], help="the scene (the paper's reference case)")
+    p.add_argument("case", type=case_name(), metavar="CASE",
+                   help="slider-crank (the paper's reference case), " + USER_CASE_HELP)
     p.add_argument("--design", metavar="NPZ",
                    help="design.npz of `ffr-jax optimize` (its physical densities x_phys and its case settings)")
     p.add_argument("--value", type=float, default=None,
@@ -36,7 +39,15 @@ def _add_design_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _case_and_design(args: argparse.Namespace):
-    """The case (settings: defaults < the design's run < options) and the physical densities."""
+    """The case (settings: defaults < the design's run < options; a user's case: its function's) and the
+    physical densities."""
+    user = is_user_case(args.case)
+    if not user and args.case != "slider-crank":
+        raise ValueError(f"animate and export take slider-crank or a user's case FILE.py:FUNCTION, not {args.case}.")
+    given = [f"--{key}" for key in _CASE_DEFAULTS if getattr(args, key) is not None]
+    if user and given:
+        raise ValueError(f"{', '.join(given)}: not options of a user's case ({args.case} sets its mesh, modes and "
+                         "times itself).")
     settings = dict(_CASE_DEFAULTS)
     x_phys = None
     if args.design is not None:
@@ -50,13 +61,20 @@ def _case_and_design(args: argparse.Namespace):
                 raise ValueError(f"{path} holds no physical densities (x_phys); pass the design.npz written by "
                                  "`ffr-jax optimize`.")
             x_phys = np.asarray(stored["x_phys"], dtype=float)
-            if "config" in stored.files:
+            if "config" in stored.files and not user:
                 config = json.loads(str(stored["config"]))
                 settings.update({key: config[key] for key in settings if key in config})
     settings.update({key: getattr(args, key) for key in settings if getattr(args, key) is not None})
-    case = slider_crank_case(int(settings["nx"]), int(settings["ny"]), int(settings["modes"]), float(settings["t1"]))
+    if user:
+        case = load_user_case(args.case)
+    else:
+        case = slider_crank_case(int(settings["nx"]), int(settings["ny"]), int(settings["modes"]),
+                                 float(settings["t1"]))
     if x_phys is None:
         x_phys = np.asarray(case.initial_design(0.5 if args.value is None else args.value))
+    elif x_phys.shape != (case.n_design,) and user:
+        raise ValueError(f"The design has {x_phys.size} densities, the designed body of {args.case} "
+                         f"{case.n_design}: give the design made for this case.")
     elif x_phys.shape != (case.n_design,):
         raise ValueError(f"The design has {x_phys.size} densities, the {case.mesh.nx} x {case.mesh.ny} rod "
                          f"{case.n_design}: give the --nx/--ny the design was made with.")
@@ -92,6 +110,10 @@ def add_io_parsers(sub) -> None:
     )
     _add_design_arguments(p)
     p.add_argument("--vtu", metavar="FILE", help="VTU file to write")
+    p.add_argument("--vtu-series", dest="vtu_series", metavar="FILE.pvd",
+                   help="the motion for ParaView: FILE.pvd and one .vtu per time in FILE_vtu/ (the body at its rigid "
+                        "placement, elastic displacement as point data for Warp By Vector, density as cell data)")
+    p.add_argument("--frames", type=int, default=60, help="times of --vtu-series over [0, t1] (default 60)")
     p.add_argument("--svg", metavar="FILE", help="SVG outline to write")
     p.add_argument("--dxf", metavar="FILE", help="DXF outline to write")
     p.add_argument("--level", type=float, default=0.5, help="iso-value of the outline (default 0.5)")
@@ -113,11 +135,18 @@ def _export(args: argparse.Namespace) -> int:
     from ._outline import density_outline, write_dxf, write_svg
     from ._vtu import write_vtu
 
-    if args.vtu is None and args.svg is None and args.dxf is None:
-        raise ValueError("Nothing to export: give --vtu, --svg and/or --dxf.")
+    from ._vtu_series import write_vtu_series
+
+    if args.vtu is None and args.svg is None and args.dxf is None and args.vtu_series is None:
+        raise ValueError("Nothing to export: give --vtu, --vtu-series, --svg and/or --dxf.")
+    if args.vtu_series is not None and not Path(args.vtu_series).suffix.lower() == ".pvd":
+        raise ValueError(f"--vtu-series {args.vtu_series}: name the .pvd collection (e.g. motion.pvd).")
     case, x_phys = _case_and_design(args)
     if args.vtu is not None:
         print(f"wrote {write_vtu(args.vtu, case, x_phys)} (density, design, mode_1..mode_{case.n_modes})")
+    if args.vtu_series is not None:
+        written = write_vtu_series(args.vtu_series, case, x_phys, frames=args.frames)
+        print(f"wrote {written} ({args.frames} times over [0, {case.t1}] s: elastic_displacement, density, design)")
     if args.svg is not None or args.dxf is not None:
         loops = len(density_outline(case, x_phys, args.level))
         for path, write in ((args.svg, write_svg), (args.dxf, write_dxf)):

@@ -9,7 +9,7 @@ import numpy as np
 
 from .._api import METHODS
 from .._cli_checks import optimize_options
-from .._cli_scenes import SCENES, describe, make_case, scene_settings
+from .._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_case, make_case, scene_settings
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
 from ._mma import DEFAULT_MOVE
@@ -58,10 +58,11 @@ def add_optimize_parser(sub) -> None:
             "must agree)."
         ),
     )
-    p.add_argument("case", choices=[*SCENES, "four-bar-two-links"],
+    p.add_argument("case", type=case_name(("four-bar-two-links",)), metavar="CASE",
                    help="the scene: " + "; ".join(f"{k}: {v}" for k, v in SCENES.items())
                         + "; four-bar-two-links: the crank-rocker whose coupler and rocker are both flexible and "
-                          "designed together (MMA, a filter per rod, defaults --nx 40 --ny 4 --modes 3 --t1 1)")
+                          "designed together (MMA, a filter per rod, defaults --nx 40 --ny 4 --modes 3 --t1 1); "
+                        + USER_CASE_HELP)
     p.add_argument("--volume-per-body", dest="volume_per_body", type=float, nargs="+", metavar="V",
                    help="four-bar-two-links: one volume bound per rod (coupler rocker) instead of the shared --volume "
                         "(the area fraction of both rods together)")
@@ -127,7 +128,8 @@ def _settings(args: argparse.Namespace) -> tuple[Path, dict, set]:
         settings.update(config)
         stored = set(config)
     else:
-        directory = Path(args.out if args.out is not None else f"optimize-{args.case}")
+        name = Path(args.case.rpartition(":")[0]).stem if is_user_case(args.case) else args.case
+        directory = Path(args.out if args.out is not None else f"optimize-{name}")
     given = {key: getattr(args, key) for key in _DEFAULTS if getattr(args, key) is not None}
     if args.resume is not None:
         differ = {key: value for key, value in given.items() if settings[key] != value}
