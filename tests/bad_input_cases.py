@@ -379,6 +379,28 @@ API_32 += [
         c.case, c.x, fj.FiniteDifferences(step=1e-5), rtol=1e-6), V, "noise floor .* at least 100 rtol = 0.0001",
         "value_and_grad() trace"),
 ]
+API_32 += [
+    # Misleading before: a NaN parameter surfaced as Newton's "cannot assemble ... check the scene geometry" (or as
+    # "scale must be positive"); now refused at construction with the field named.
+    Bad("SpringDamper(stiffness=nan)", lambda c: fj.SpringDamper(0, 0, stiffness=NAN), V,
+        "SpringDamper stiffness must be finite", "SpringDamper()"),
+    Bad("Gravity((0, nan))", lambda c: fj.Gravity((0.0, NAN)), V, "Gravity acceleration must be finite", "Gravity()"),
+    Bad("ConstantSpeedLaw(nan)", lambda c: fj.ConstantSpeedLaw(NAN), V, "ConstantSpeedLaw speed must be finite",
+        "ConstantSpeedLaw()"),
+    Bad("RampLaw(angle_at_ramp=nan)", lambda c: fj.RampLaw(1.0, NAN), V, "RampLaw angle_at_ramp must be finite",
+        "RampLaw()"),
+    Bad("PointOnLine(direction=(0, 0))", lambda c: fj.PointOnLine(0, 1, direction=(0.0, 0.0)), V,
+        "direction must be a non-zero", "PointOnLine()"),
+    Bad("CrankPin(radius=nan)", lambda c: fj.CrankPin(0, 0, NAN, fj.ConstantSpeedLaw(1.0)), V,
+        "CrankPin radius must be finite", "CrankPin()"),
+    Bad("FunctionConstraint with a NaN bound", lambda c: fj.FunctionConstraint(lambda x: (jnp.sum(x), x), NAN), V,
+        "FunctionConstraint 'function': bound must be finite", "FunctionConstraint()"),
+    # A broadcasting TypeError inside MMA's update after 11 s before; now before anything compiles (the
+    # objective's gradient shape from jax.eval_shape).
+    Bad("MMA with x0 of the wrong length", lambda c: fj.optimize(lambda x: (jnp.sum(x), jnp.ones(4)), jnp.full(3, 0.5),
+                                                               fj.MMA(), iterations=1), V,
+        r"x0 has shape \(3,\), but the objective's gradient has shape \(4,\)", "optimize() entry"),
+]
 API += API_32
 
 # Every command line has the small mesh; the bad option is what fails, before anything compiles.

@@ -130,3 +130,13 @@ def test_cli_json_is_strict():
     for bad in (float("nan"), float("inf")):
         with pytest.raises(ValueError, match=r"--json out.json: grad\[1\] is .*; nothing was written"):
             strict_json_of({"psi": 1.0, "grad": [0.5, bad]})
+
+
+def test_numpy_integers_are_integers():
+    """Issue 32: `slider_crank(nx=np.int64(4))` ("nx must be at least 4 ... got 4" before) builds the same case as
+    Python ints: the same static sizes (Python ints, so the compiled programs are shared) and the same design."""
+    with user_view():  # the suite's runtime type checks read the annotation `int` strictly
+        case = fj.cases.slider_crank(np.int64(4), np.int64(2), np.int64(2), 0.1, t_ramp=0.05)
+    assert (case.mesh.nx, case.mesh.ny, case.n_modes) == (4, 2, 2)
+    assert all(type(n) is int for n in (case.mesh.nx, case.mesh.ny, case.n_modes))
+    assert case.n_design == 4

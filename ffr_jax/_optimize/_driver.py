@@ -163,6 +163,7 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
         _write_log(directory / LOG, history)
         log = open(directory / LOG, "a")
     step = make_step(fun, optimizer, constraints)
+    _check_gradient_shape(step, x, beta_of(history.steps))
     bar = Progress(iterations, history.steps, progress)
     if history.steps < iterations:
         bar.compiling()
@@ -250,6 +251,23 @@ def _postfix(value, volume, change, g) -> str:
     if g.size:
         text += f" max g {g.max():+.2e}"
     return text + f" change {change:.2e}"
+
+
+def _check_gradient_shape(step, x, beta) -> None:
+    """The objective's gradient has the design's shape, or a `ValueError` before anything is compiled.
+
+    `jax.eval_shape` traces the objective (a fraction of its compile time) but compiles and runs
+    nothing; an `x0` of the wrong length otherwise failed inside the optimizer's update, after the
+    objective had compiled, with a broadcasting `TypeError`.
+    """
+    shapes = jax.eval_shape(step.objective, x, beta)
+    grad_shape = tuple(shapes[1].shape) if isinstance(shapes, tuple) and len(shapes) == 2 else None
+    if grad_shape != tuple(x.shape):
+        raise ValueError(
+            f"The start design x0 has shape {tuple(x.shape)}, but the objective's gradient has shape {grad_shape}: "
+            "x0 must be a design of the case the objective was made from (e.g. case.initial_design(0.5), "
+            "with case.n_design variables)."
+        )
 
 
 def _beta_schedule(beta) -> Callable:

@@ -4,6 +4,7 @@ from collections.abc import Callable
 
 import equinox as eqx
 
+from .._checks import number, positive
 from .._typing import Design
 from ._constraint import AbstractDesignConstraint, status
 
@@ -44,13 +45,11 @@ class FunctionConstraint(AbstractDesignConstraint):
         if not callable(fun):
             raise ValueError(f"FunctionConstraint needs a function x -> (value, grad), got {type(fun).__name__}.")
         self.fun = fun
-        self.bound = float(bound)
+        self.bound = number(bound, f"FunctionConstraint {name!r}: bound")
         self.lower = bool(lower)
         if scale is None:
             scale = abs(self.bound) if self.bound != 0.0 else 1.0
-        if not scale > 0.0:
-            raise ValueError(f"The scale of a FunctionConstraint must be positive, got {scale}.")
-        self.scale = float(scale)
+        self.scale = positive(scale, f"The scale of FunctionConstraint {name!r}")
         self.name = name
 
     def value_and_grad(self, x: Design, beta=None):

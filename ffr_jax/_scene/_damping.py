@@ -4,6 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ._base import AbstractForce
+from ._laws import _scalar
 
 
 class RayleighDamping(AbstractForce):
@@ -15,7 +16,7 @@ class RayleighDamping(AbstractForce):
 
     def __init__(self, body: int, alpha: float = 0.0, beta: float = 0.0):
         self.body = body
-        self.alpha, self.beta = jnp.asarray(float(alpha)), jnp.asarray(float(beta))
+        self.alpha, self.beta = _scalar(alpha, "RayleighDamping alpha"), _scalar(beta, "RayleighDamping beta")
 
     def generalized_force(self, t, y_r, z_r, scene):
         del t, y_r
@@ -37,7 +38,7 @@ class ModalDamping(AbstractForce):
 
     def __init__(self, body: int, ratio: float):
         self.body = body
-        self.ratio = jnp.asarray(float(ratio))
+        self.ratio = _scalar(ratio, "ModalDamping ratio")
 
     def generalized_force(self, t, y_r, z_r, scene):
         del t, y_r

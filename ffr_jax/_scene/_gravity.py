@@ -6,6 +6,7 @@ from .._body_dynamics import rotation
 from .._spatial import _rigid_body as spatial
 from .._spatial._body_data import SpatialBodyData
 from ._base import AbstractForce
+from ._references import finite_vector
 
 
 class Gravity(AbstractForce):
@@ -20,7 +21,7 @@ class Gravity(AbstractForce):
     acceleration: jnp.ndarray
 
     def __init__(self, acceleration=(0.0, -9.81)):
-        self.acceleration = jnp.asarray(acceleration, dtype=float)
+        self.acceleration = finite_vector(acceleration, "Gravity acceleration", (2, 3))
 
     def generalized_force(self, t, y_r, z_r, scene):
         del t, z_r

@@ -4,6 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ._base import AbstractConstraint
+from ._references import finite_vector
 
 
 class GroundRevolute(AbstractConstraint):
@@ -15,7 +16,7 @@ class GroundRevolute(AbstractConstraint):
 
     def __init__(self, body: int, marker: int, point=(0.0, 0.0)):
         self.body, self.marker = body, marker
-        self.point = jnp.asarray(point, dtype=float)
+        self.point = finite_vector(point, "GroundRevolute point", 2)
 
     @property
     def n_equations(self) -> int:

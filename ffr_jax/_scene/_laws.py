@@ -37,6 +37,9 @@ class RampLaw(AbstractLaw):
     speed: jnp.ndarray
 
     def __init__(self, t_ramp: float = 2.0, angle_at_ramp: float = 12 * np.pi, speed: float = 12 * np.pi):
+        t_ramp = float(_scalar(t_ramp, "RampLaw t_ramp"))
+        angle_at_ramp = float(_scalar(angle_at_ramp, "RampLaw angle_at_ramp"))
+        speed = float(_scalar(speed, "RampLaw speed"))
         if t_ramp <= 0:
             raise ValueError(f"t_ramp must be positive, got {t_ramp}.")
         # Conditions on a_4..a_7 (a_0..a_3 vanish): phi, phi', phi'', phi''' at t_ramp.
@@ -70,8 +73,8 @@ class ConstantSpeedLaw(AbstractLaw):
     speed: jnp.ndarray
 
     def __init__(self, speed: float, initial: float = 0.0):
-        self.initial = jnp.asarray(float(initial))
-        self.speed = jnp.asarray(float(speed))
+        self.initial = _scalar(initial, "ConstantSpeedLaw initial")
+        self.speed = _scalar(speed, "ConstantSpeedLaw speed")
 
     def __call__(self, t):
         return self.initial + self.speed * t

@@ -4,6 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ._base import AbstractConstraint
+from ._references import finite_vector
 
 
 class PointOnLine(AbstractConstraint):
@@ -19,9 +20,11 @@ class PointOnLine(AbstractConstraint):
     direction: jnp.ndarray
 
     def __init__(self, body: int, marker: int, point=(0.0, 0.0), direction=(1.0, 0.0)):
-        d = jnp.asarray(direction, dtype=float)
+        d = finite_vector(direction, "PointOnLine direction", 2)
+        if float(jnp.linalg.norm(d)) == 0.0:
+            raise ValueError("PointOnLine direction must be a non-zero (2,) vector, got (0, 0).")
         self.body, self.marker = body, marker
-        self.point = jnp.asarray(point, dtype=float)
+        self.point = finite_vector(point, "PointOnLine point", 2)
         self.direction = d / jnp.linalg.norm(d)
 
     @property

@@ -5,6 +5,8 @@ import jax.numpy as jnp
 
 from ._base import AbstractConstraint
 from ._laws import AbstractLaw
+from ._laws import _scalar
+from ._references import finite_vector
 
 
 class CrankPin(AbstractConstraint):
@@ -22,8 +24,8 @@ class CrankPin(AbstractConstraint):
 
     def __init__(self, body: int, marker: int, radius: float, angle: AbstractLaw, centre=(0.0, 0.0)):
         self.body, self.marker = body, marker
-        self.radius = jnp.asarray(float(radius))
-        self.centre = jnp.asarray(centre, dtype=float)
+        self.radius = _scalar(radius, "CrankPin radius")
+        self.centre = finite_vector(centre, "CrankPin centre", 2)
         self.angle = angle
 
     @property

@@ -11,6 +11,9 @@ import dataclasses
 import numbers
 
 import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
 
 # (body field, marker field or None) pairs that scene elements and objective terms use.
 _PAIRS = (("body", "marker"), ("body_i", "marker_i"), ("body_j", "marker_j"))
@@ -78,3 +81,20 @@ def _check_body(body, what: str, n_bodies: int, scene) -> None:
             + (" A negative index does not count from the end here." if isinstance(body, numbers.Integral)
                and not isinstance(body, bool) and body < 0 else "")
         )
+
+
+def finite_vector(value, name: str, size: int | tuple[int, ...]):
+    """`value` as a finite float64 vector of one of the lengths `size`, or a `ValueError` naming `name`
+    (a NaN in a point, a direction or gravity otherwise surfaced as Newton's "cannot assemble")."""
+    sizes = (size,) if isinstance(size, int) else tuple(size)
+    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(value)):
+        return jnp.asarray(value, dtype=float)  # built inside a traced function: its values are not known yet
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a vector of {' or '.join(map(str, sizes))} numbers, got {value!r}.") from None
+    if array.shape not in {(n,) for n in sizes}:
+        raise ValueError(f"{name} must have shape {' or '.join(f'({n},)' for n in sizes)}, got {array.shape}.")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite, got {array.tolist()}.")
+    return jnp.asarray(array)

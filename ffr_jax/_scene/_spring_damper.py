@@ -5,6 +5,8 @@ import jax
 import jax.numpy as jnp
 
 from ._base import AbstractForce
+from ._laws import _scalar
+from ._references import finite_vector
 
 
 class SpringDamper(AbstractForce):
@@ -27,10 +29,10 @@ class SpringDamper(AbstractForce):
     def __init__(self, body_i, marker_i, body_j=-1, marker_j=0, *, stiffness, damping=0.0, rest_length=0.0,
                  ground_point=(0.0, 0.0)):
         self.body_i, self.marker_i, self.body_j, self.marker_j = body_i, marker_i, body_j, marker_j
-        self.stiffness = jnp.asarray(float(stiffness))
-        self.damping = jnp.asarray(float(damping))
-        self.rest_length = jnp.asarray(float(rest_length))
-        self.ground_point = jnp.asarray(ground_point, dtype=float)
+        self.stiffness = _scalar(stiffness, "SpringDamper stiffness")
+        self.damping = _scalar(damping, "SpringDamper damping")
+        self.rest_length = _scalar(rest_length, "SpringDamper rest_length")
+        self.ground_point = finite_vector(ground_point, "SpringDamper ground_point", (2, 3))
 
     def _length(self, y_r, scene):
         a = scene.marker_position(self.body_i, self.marker_i, y_r)
