@@ -75,6 +75,7 @@ from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as 
 from ._optimize._conditions import OperatingConditions as OperatingConditions
 from ._optimize._constraint import AbstractDesignConstraint as AbstractDesignConstraint
 from ._optimize._driver import ConstraintViolationWarning as ConstraintViolationWarning, OptimizeResult as OptimizeResult, optimize as optimize
+from ._optimize._step_error import StepBackOffWarning as StepBackOffWarning
 from ._optimize._frequency import FrequencyConstraint as FrequencyConstraint
 from ._optimize._function_constraint import FunctionConstraint as FunctionConstraint
 from ._optimize._history import History as History

@@ -15,7 +15,7 @@ from jax.flatten_util import ravel_pytree
 import numpy as np
 import optax
 
-from .._errors import FFRJaxError
+from .._errors import FFRJaxError, SimulationError
 from ._checkpoint import Checkpoint, CheckpointError, load_checkpoint, restore_opt_state, save_checkpoint
 from ._history import History
 from ._progress import Progress
@@ -23,7 +23,8 @@ from ._projection import _check_beta
 from ._constraint import AbstractDesignConstraint
 from ._pytree import Raveled, is_flat, raveled_objective
 from ._step import as_optimizer, evaluate_constraints, make_step
-from ._step_error import step_error
+from ._mma import MMA
+from ._step_error import StepBackOffWarning, redo_smaller, step_error
 
 CHECKPOINT = "checkpoint.npz"
 LOG = "log.csv"
@@ -41,6 +42,8 @@ class OptimizeResult(NamedTuple):
       design (empty for Adam and OC); `names`: their labels; `descriptions`: one line per
       constraint with the constrained quantity and its bound.
     - `feasible`: whether every `g_i <= feasibility_tolerance` at the final design.
+    - `back_offs`: how many MMA updates were redone with a halved move limit because the design
+      they produced could not be simulated (0 in a run whose steps all went through).
     """
 
     x: jax.Array
@@ -50,6 +53,7 @@ class OptimizeResult(NamedTuple):
     names: tuple[str, ...] = ()
     descriptions: tuple[str, ...] = ()
     feasible: bool = True
+    back_offs: int = 0
 
 
 def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int, directory=None,
@@ -74,7 +78,10 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
     that names the step (the last checkpoint is kept); so does an error raised inside the step's
     compiled program (e.g. Newton's method finding that the mechanism cannot assemble with the
     design a too large update produced), as the package's [`SimulationError`][] or
-    [`DesignError`][] with the step, the solver's reason and what to change.
+    [`DesignError`][] with the step, the solver's reason and what to change. With [`MMA`][] a
+    design that cannot be simulated first makes the run back off: the update that produced it is
+    redone with half the move limit (up to four times, a `StepBackOffWarning` each time; the
+    result's `back_offs` counts them), then the run goes on with the optimizer's own limit.
 
     **Arguments:**
     - `fun`: `x -> (value, grad)` ([`make_objective`][] or any other).
@@ -167,23 +174,43 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
     bar = Progress(iterations, history.steps, progress)
     if history.steps < iterations:
         bar.compiling()
+    previous, back_offs = None, 0
     try:
         for k in range(history.steps, iterations):
             if stop_change is not None and history.steps and history.change[-1] <= stop_change:
                 if log is not None and history.steps % checkpoint_every:  # keep the last step
                     _save(directory, history.steps, x, opt_state, history, config)
                 break
-            try:
-                x_new, opt_state, info = step(x, opt_state, beta_of(k))
-                value, volume, change = float(info.value), float(info.volume), float(info.change)
-                g = np.asarray(info.constraints, dtype=float)
-            except (FFRJaxError, eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, ValueError) as err:
-                clean = step_error(k, err, history.steps)  # the step and the reason, not XLA's traceback
-                if clean is None:
-                    raise
-                raise clean from None
+            halvings = 0
+            while True:
+                try:
+                    x_new, state_new, info = step(x, opt_state, beta_of(k))
+                    value, volume, change = float(info.value), float(info.volume), float(info.change)
+                    g = np.asarray(info.constraints, dtype=float)
+                    break
+                except (FFRJaxError, eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, ValueError) as err:
+                    clean = step_error(k, err, history.steps)  # the step and the reason, not XLA's traceback
+                    if clean is None:
+                        raise
+                    if not (isinstance(clean, SimulationError) and isinstance(optimizer, MMA) and previous):
+                        raise clean from None
+                    # x_k (from step k - 1's update) cannot be simulated: redo that update with half the move.
+                    halvings += 1
+                    x, opt_state, history = redo_smaller(lambda o, c: make_step(fun, o, c), optimizer, constraints,
+                                                         previous, beta_of(k - 1), history, halvings, k, clean)
+                    back_offs += 1
+                    warnings.warn(f"Step {k}: the design from step {k - 1}'s update could not be simulated (the step "
+                                  f"was too large); that update was redone with the move limit "
+                                  f"{optimizer.move / 2 ** halvings:g}.", StepBackOffWarning, stacklevel=2)
+                    if log is not None:
+                        log.close()
+                        _write_log(directory / LOG, history)
+                        log = open(directory / LOG, "a")
+                        if k % checkpoint_every == 0:
+                            _save(directory, k, x, opt_state, history, config)
             _check_finite(k, value, g, names, x_new, history.steps)
-            x = x_new
+            previous = (x, opt_state)  # step k's start, for redoing its update if x_{k+1} fails
+            x, opt_state = x_new, state_new
             history = history.append(value, volume, change, g)
             if log is not None:
                 log.write(_log_row(k, value, volume, change, g))
@@ -198,7 +225,7 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
             log.close()
         bar.close()
     result = _finish(x, opt_state, history, constraints, names, beta_of(max(history.steps - 1, 0)),
-                     feasibility_tolerance)
+                     feasibility_tolerance)._replace(back_offs=back_offs)
     return result if unravel is None else result._replace(x=unravel(result.x))
 
 

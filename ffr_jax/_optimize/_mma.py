@@ -119,6 +119,12 @@ class MMA(AbstractOptimizer):
         self.objective_scale = None if objective_scale is None else float(objective_scale)
         self.epsimin = float(epsimin)
 
+    def with_move(self, move: float) -> "MMA":
+        """The same method with another move limit (e.g. halved after a step too large; see [`optimize`][])."""
+        return MMA(self.x_min, self.x_max, move=move, asymptote_init=self.asymptote_init,
+                   asymptote_increase=self.asymptote_increase, asymptote_decrease=self.asymptote_decrease, c=self.c,
+                   d=self.d, objective_scale=self.objective_scale, epsimin=self.epsimin)
+
     def start(self, x0, beta):
         del beta
         return jnp.clip(jnp.asarray(x0, dtype=float), self.x_min, self.x_max)

@@ -37,3 +37,41 @@ def step_error(k: int, err: BaseException, saved_steps: int) -> Exception | None
     advice = _AT_START if k == 0 else _ADVICE.format(k=k, previous=k - 1, saved=saved_steps)
     return type(clean)(f"Step {k} of the optimisation stopped: the design could not be simulated. The solver "
                        f"said: {reason}{advice}")
+
+
+class StepBackOffWarning(UserWarning):
+    """A step of [`optimize`][] produced a design that could not be simulated and was redone with half the move."""
+
+
+# How often one update is redone with half the move limit before the run stops (0.2 -> 0.0125).
+MAX_HALVINGS = 4
+
+
+def redo_smaller(make_step, optimizer, constraints, previous, beta, history, halvings: int, k: int, reason):
+    """Redo the update of step `k - 1` with `optimizer`'s move limit halved once more.
+
+    The design `x_k` that update produced could not be simulated (`reason`, the package's error of
+    step `k`). The update is repeated from `previous = (x_{k-1}, state_{k-1})` by MMA with move
+    `move / 2^halvings`; the objective at `x_{k-1}` is evaluated again (its compiled program is
+    reused), and the last row of `history` is replaced by this update's (same `psi` and constraint
+    values, its own change). The run then goes on with the optimizer's own move limit.
+
+    **Returns:** `(x_k, state_k, history)` of the redone update.
+
+    **Raises:** `reason` with a note when `halvings` exceeds [`MAX_HALVINGS`][].
+    """
+    import numpy as np
+
+    from ._history import History
+
+    if halvings > MAX_HALVINGS:
+        raise type(reason)(f"{reason} (The update of step {k - 1} was redone {MAX_HALVINGS} times with the move "
+                           f"limit halved each time, down to {optimizer.move / 2 ** MAX_HALVINGS:g}, and its design "
+                           "still could not be simulated.)") from None
+    smaller = optimizer.with_move(optimizer.move / 2**halvings)
+    x, state, info = make_step(smaller, constraints)(*previous, beta)
+    kept = History(history.value[:-1], history.volume[:-1], history.change[:-1], history.constraint_values[:-1],
+                   history.names)
+    history = kept.append(float(info.value), float(info.volume), float(info.change),
+                          np.asarray(info.constraints, dtype=float))
+    return x, state, history
