@@ -448,6 +448,27 @@ CLI = [
            "the run was made with --volume 0.5", "CLI options", lambda c: c.checkpoint("cli_conflict")),
 ]
 
+CLI_32 = [
+    # Silently wrong before: the resumed run was the checkpoint's scene (slider-crank), whatever the command named.
+    BadCli("--resume a slider-crank run as link-four-bar", "optimize link-four-bar --resume {setup}",
+           "holds a run of slider-crank, not link-four-bar; resume it with ffr-jax optimize slider-crank --resume",
+           "CLI settings", lambda c: c.checkpoint("cli_other_scene")),
+    BadCli("--resume a slider-crank run as four-bar-two-links", "optimize four-bar-two-links --resume {setup}",
+           "holds a run of slider-crank, not four-bar-two-links", "CLI settings",
+           lambda c: c.checkpoint("cli_other_scene_2")),
+    # Silently wrong before: nan > 0 is false, so the mass bound was dropped; --out '' wrote into the current folder.
+    BadCli("optimize --mass-max nan", f"{O} --optimizer mma --mass-max nan --out {{tmp}}/o7", "--mass-max must be finite",
+           "CLI settings"),
+    BadCli("optimize --frequency-min -5", f"{O} --optimizer mma --frequency-min -5 --out {{tmp}}/o8",
+           r"--frequency-min must be >= 0", "CLI settings"),
+    BadCli("optimize --mma-move 2", f"{O} --optimizer mma --mma-move 2 --out {{tmp}}/o9", r"--mma-move must lie in \(0, 1\]",
+           "CLI settings"),
+    BadCli("optimize --out ''", f"{O} --out=", "--out '' names no directory", "CLI settings"),
+    BadCli("optimize --force-resume without --resume", f"{O} --force-resume --out {{tmp}}/o10",
+           "--force-resume applies to --resume", "CLI settings"),
+]
+CLI += CLI_32
+
 
 def _file(path: Path) -> Path:
     path.write_text("not a directory")

@@ -28,6 +28,8 @@ class Checkpoint(NamedTuple):
     - `opt_state_leaves`: the leaves of the optimizer state (see [`restore_opt_state`][]).
     - `history`: the [`History`][] of those steps, with every constraint's values and names;
       `config`: the settings of the run (JSON data).
+    - `fingerprint`: digests of the objective, constraints and optimizer that made the run (JSON
+      data, see [`optimize`][]), or `None` (checkpoints written before fingerprints).
 
     The runs are deterministic (no random numbers), so there is no RNG state to keep.
     """
@@ -37,6 +39,7 @@ class Checkpoint(NamedTuple):
     opt_state_leaves: tuple[np.ndarray, ...]
     history: History
     config: dict
+    fingerprint: dict | None = None
 
 
 def save_checkpoint(path, checkpoint: Checkpoint) -> None:
@@ -63,6 +66,8 @@ def save_checkpoint(path, checkpoint: Checkpoint) -> None:
         "history_constraints": np.asarray(checkpoint.history.constraint_values),
         "constraint_names": np.array(json.dumps(list(checkpoint.history.names))),
         "config": np.array(json.dumps(checkpoint.config, sort_keys=True)),
+        **({} if checkpoint.fingerprint is None else
+           {"fingerprint": np.array(json.dumps(checkpoint.fingerprint, sort_keys=True))}),
     }
     for i, leaf in enumerate(checkpoint.opt_state_leaves):
         arrays[f"opt_state_{i}"] = np.asarray(leaf)
@@ -127,6 +132,7 @@ def load_checkpoint(path, design_bounds: tuple[float, float] = (0.0, 1.0)) -> Ch
                              f"{len(names)} constraints) for {iteration} iterations")
         leaves = tuple(arrays[f"opt_state_{i}"] for i in range(int(arrays["n_opt_state"])))
         config = json.loads(str(arrays["config"]))
+        fingerprint = json.loads(str(arrays["fingerprint"])) if "fingerprint" in arrays else None
         x = arrays["x"]
     except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as err:
         raise CheckpointError(
@@ -134,7 +140,7 @@ def load_checkpoint(path, design_bounds: tuple[float, float] = (0.0, 1.0)) -> Ch
             "It cannot be resumed; start a new run."
         ) from err
     _check_values(path, x, leaves, history, design_bounds)
-    return Checkpoint(iteration, x, leaves, history, config)
+    return Checkpoint(iteration, x, leaves, history, config, fingerprint)
 
 
 def _check_values(path: Path, x, leaves, history: History, design_bounds) -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .._api import METHODS
+from .._checks import in_interval, number
 from .._cli_checks import optimize_options
 from .._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_case, make_case, scene_settings
 from ._checkpoint import load_checkpoint
@@ -95,6 +96,9 @@ def add_optimize_parser(sub) -> None:
                    help="sensitivity method (default adjoint)")
     p.add_argument("--out", metavar="DIR", help="output directory of a new run (default optimize-<case>)")
     p.add_argument("--resume", metavar="DIR", help="continue the run stored in DIR")
+    p.add_argument("--force-resume", action="store_true",
+                   help="with --resume: continue even if the checkpoint's fingerprints (case, mesh, constraints, "
+                        "optimizer settings) differ from the run built now")
     p.add_argument("--checkpoint-every", type=int, default=10, metavar="K",
                    help="steps between checkpoints (default 10)")
     p.add_argument("--nx", type=int, help="slider-crank: elements along the rod (default 100)")
@@ -125,9 +129,18 @@ def _settings(args: argparse.Namespace) -> tuple[Path, dict, set]:
             raise ValueError(f"--out {args.out} and --resume {args.resume} name different directories; "
                              "a resumed run continues in its own directory.")
         config = load_checkpoint(directory / CHECKPOINT).config
+        if "case" in config and config["case"] != args.case:
+            raise ValueError(f"--resume {args.resume} holds a run of {config['case']}, not {args.case}; resume it with "
+                             f"ffr-jax optimize {config['case']} --resume {args.resume}, or start a {args.case} run "
+                             "with --out.")
         settings.update(config)
         stored = set(config)
     else:
+        if args.force_resume:
+            raise ValueError("--force-resume applies to --resume DIR.")
+        if args.out is not None and not args.out.strip():
+            raise ValueError("--out '' names no directory (it would write into the current one); give a directory "
+                             "name, or leave --out out for optimize-<case>.")
         name = Path(args.case.rpartition(":")[0]).stem if is_user_case(args.case) else args.case
         directory = Path(args.out if args.out is not None else f"optimize-{name}")
     given = {key: getattr(args, key) for key in _DEFAULTS if getattr(args, key) is not None}
@@ -138,7 +151,19 @@ def _settings(args: argparse.Namespace) -> tuple[Path, dict, set]:
                 f"--{key.replace('_', '-')} {settings[key]}" for key in differ) + "; leave these options out "
                 "or start a new run with --out.")
     settings.update(given)
+    _check_bounds(settings)
     return directory, settings, stored
+
+
+def _check_bounds(settings: dict) -> None:
+    """The optional bounds and limits are finite numbers >= 0 (a NaN --mass-max used to drop the bound, as
+    `nan > 0` is false), the MMA move limit lies in (0, 1]."""
+    for key in ("frequency_min", "mass_max", "stop_change"):
+        value = number(settings[key], f"--{key.replace('_', '-')}")
+        if value < 0.0:
+            raise ValueError(f"--{key.replace('_', '-')} must be >= 0 (0 = none), got {value}.")
+    in_interval(settings["mma_move"], "--mma-move", 0.0, 1.0, low_open=True,
+                advice="It is MMA's largest change of a density per step.")
 
 
 @functools.cache
@@ -165,7 +190,41 @@ def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | Non
     return case, filt, projection, fun
 
 
+class RunStopped(RuntimeError):
+    """`ffr-jax optimize` stopped by the file system (disk full, a read-only or vanished directory) or by
+    Ctrl-C: one line that says what happened, what was kept and how to continue."""
+
+
 def _run(args: argparse.Namespace) -> int:
+    """`ffr-jax optimize`: the run, with a file-system error or Ctrl-C reported as [`RunStopped`][]."""
+    try:
+        return _run_command(args)
+    except (OSError, KeyboardInterrupt) as err:
+        raise RunStopped(_stopped(args, err)) from None
+
+
+def _stopped(args: argparse.Namespace, err: BaseException) -> str:
+    """What stopped the run, the last checkpoint it kept and the command that continues it."""
+    if isinstance(err, KeyboardInterrupt):
+        what = "interrupted (Ctrl-C)"
+    else:
+        where = f" ({err.filename})" if getattr(err, "filename", None) else ""
+        what = f"stopped by the file system: {err.strerror or err}{where}"
+    if args.resume is not None:
+        directory = Path(args.resume)
+    elif args.out:
+        directory = Path(args.out)
+    else:
+        directory = Path(f"optimize-{Path(args.case.rpartition(':')[0]).stem if is_user_case(args.case) else args.case}")
+    try:
+        kept = load_checkpoint(directory / CHECKPOINT).iteration
+    except Exception:  # noqa: BLE001 - no readable checkpoint is an answer here, not an error
+        return f"optimize {what}; {directory} holds no readable checkpoint, so there is nothing to resume: start again."
+    return (f"optimize {what}; the last checkpoint (step {kept}) is kept in {directory / CHECKPOINT}; continue with "
+            f"ffr-jax optimize {args.case} --resume {directory}")
+
+
+def _run_command(args: argparse.Namespace) -> int:
     import optax
 
     import ffr_jax as fj
@@ -215,7 +274,7 @@ def _run(args: argparse.Namespace) -> int:
         fun, case.initial_design(s["volume"]), optimizer, constraints if s["optimizer"] == "mma" else constraint,
         iterations=args.iters, directory=directory, resume=args.resume is not None,
         checkpoint_every=args.checkpoint_every, config=config, progress=not args.no_progress, beta=beta,
-        stop_change=s["stop_change"] if s["stop_change"] > 0.0 else None,
+        stop_change=s["stop_change"] if s["stop_change"] > 0.0 else None, force_resume=args.force_resume,
     )
     h = result.history
     # The last iterate was projected onto the volume with the last step's beta.
@@ -274,7 +333,8 @@ def _run_two_links(args: argparse.Namespace, directory: Path, s: dict, config: d
     result = optimize(fun, case.initial_design(volumes), fj.MMA(x_min, 1.0, move=s["mma_move"]), constraints,
                       iterations=args.iters, directory=directory, resume=args.resume is not None,
                       checkpoint_every=args.checkpoint_every, config=config, progress=not args.no_progress,
-                      stop_change=s["stop_change"] if s["stop_change"] > 0.0 else None)
+                      stop_change=s["stop_change"] if s["stop_change"] > 0.0 else None,
+                      force_resume=args.force_resume)
     h = result.history
     x_phys = {name: np.asarray(v) for name, v in fj.physical_densities(result.x, filters, None).items()}
     np.savez(directory / "design.npz", psi=h.value, config=np.array(json.dumps(s, sort_keys=True)),

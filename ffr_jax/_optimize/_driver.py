@@ -17,11 +17,13 @@ import optax
 
 from .._errors import FFRJaxError, SimulationError
 from ._checkpoint import Checkpoint, CheckpointError, load_checkpoint, restore_opt_state, save_checkpoint
+from ._fingerprint import tree_fingerprint
 from ._history import History
 from ._progress import Progress
 from ._projection import _check_beta
 from ._constraint import AbstractDesignConstraint
 from ._pytree import Raveled, is_flat, raveled_objective
+from ._run_lock import RunLock
 from ._step import as_optimizer, evaluate_constraints, make_step
 from ._mma import MMA
 from ._step_error import StepBackOffWarning, redo_smaller, step_error
@@ -59,7 +61,8 @@ class OptimizeResult(NamedTuple):
 def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int, directory=None,
              resume: bool = False, checkpoint_every: int = 10, config: dict | None = None, progress: bool = True,
              callback: Callable | None = None, beta: float | Callable[[int], float] | None = None,
-             stop_change: float | None = None, feasibility_tolerance: float = 1e-3) -> OptimizeResult:
+             stop_change: float | None = None, feasibility_tolerance: float = 1e-3,
+             force_resume: bool = False) -> OptimizeResult:
     """Run up to `iterations` steps of [`make_step`][] from `x0`, with a log, checkpoints and progress.
 
     The start design is `optimizer`'s first iterate from `x0`: the projection onto the volume
@@ -96,7 +99,12 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
       [`FrequencyConstraint`][], [`FunctionConstraint`][]).
     - `iterations`: total number of steps of the run (a resumed run counts the earlier ones).
     - `directory`: where the log and the checkpoints go (created if needed); `None` writes nothing.
-    - `resume`: continue the run stored in `directory`.
+    - `resume`: continue the run stored in `directory`. The checkpoint holds fingerprints of the
+      objective (for [`make_objective`][]: the case with its mesh and body data, filter,
+      projection, method and tolerances), of the constraints (bounds, filters) and of the
+      optimizer (e.g. MMA's move limit); a resume whose objects differ is refused.
+    - `force_resume`: resume even when those fingerprints differ (the run then continues with the
+      objects given now, and its later checkpoints store their fingerprints).
     - `checkpoint_every`: steps between checkpoints.
     - `config`: JSON-serialisable settings that define the run (stored in each checkpoint; a
       resume with different settings is refused, and so is one with other constraints).
@@ -113,9 +121,29 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
 
     **Returns:** an [`OptimizeResult`][].
 
+    A run owns its `directory` while it runs (an exclusive lock, [`RunLock`][]): a second run in the
+    same directory, started while the first runs, is refused at once.
+
     **Raises:** [`CheckpointError`][] when `resume` finds no readable checkpoint or one from
-    other settings, or when a fresh run would overwrite one; `FloatingPointError` on a NaN.
+    other settings, when a fresh run would overwrite one, or when another process runs in
+    `directory`; `FloatingPointError` on a NaN.
     """
+    if directory is None or (resume and not Path(directory).is_dir()):  # nothing to own (or to resume)
+        return _optimize(fun, x0, optimizer, constraints, iterations=iterations, directory=directory, resume=resume,
+                         checkpoint_every=checkpoint_every, config=config, progress=progress, callback=callback,
+                         beta=beta, stop_change=stop_change, feasibility_tolerance=feasibility_tolerance,
+                         force_resume=force_resume)
+    Path(directory).mkdir(parents=True, exist_ok=True)
+    with RunLock(directory):
+        return _optimize(fun, x0, optimizer, constraints, iterations=iterations, directory=directory, resume=resume,
+                         checkpoint_every=checkpoint_every, config=config, progress=progress, callback=callback,
+                         beta=beta, stop_change=stop_change, feasibility_tolerance=feasibility_tolerance,
+                         force_resume=force_resume)
+
+
+def _optimize(fun, x0, optimizer, constraints, *, iterations, directory, resume, checkpoint_every, config, progress,
+              callback, beta, stop_change, feasibility_tolerance, force_resume) -> OptimizeResult:
+    """[`optimize`][] in a directory this process owns (or without one)."""
     if iterations < 0:
         raise ValueError(f"iterations must be >= 0, got {iterations}.")
     if checkpoint_every < 1:
@@ -123,6 +151,8 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
     if resume and directory is None:
         raise ValueError("resume=True needs the directory of the run to resume.")
     config = json.loads(json.dumps(config or {}, sort_keys=True))
+    config.pop(FINGERPRINT, None)  # the driver's own entry, which `_save` stores beside the config
+    objective_print = getattr(fun, "fingerprint", None)  # set by make_objective; None for a user's function
     beta_of = _beta_schedule(beta)
     unravel = None
     if not is_flat(x0):  # a design of several bodies: one flat vector inside the loop
@@ -141,6 +171,8 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
                 user_callback(k, unravel(x), info)
     optimizer, constraints = as_optimizer(optimizer, constraints)
     names = _unique_names(constraints)
+    fingerprint = {"objective": objective_print, "constraints": tree_fingerprint(constraints),
+                   "optimizer": tree_fingerprint(optimizer)}
 
     x = optimizer.start(jnp.asarray(x0, dtype=jnp.float64), beta_of(0))
     opt_state = optimizer.init(x)
@@ -148,16 +180,18 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
     directory = None if directory is None else Path(directory)
     if resume:
         checkpoint = load_checkpoint(directory / CHECKPOINT)
-        _check_config(checkpoint.config, config)
+        _check_resume(checkpoint, config, fingerprint, force_resume, directory)
         if checkpoint.history.names != names:
             raise CheckpointError(f"Cannot resume: the run was made with the constraints "
                                   f"{list(checkpoint.history.names)}, now {list(names)}.")
         if checkpoint.x.shape != x.shape:
             raise CheckpointError(f"The checkpoint's design has shape {checkpoint.x.shape}, this run's {x.shape}.")
         x = jnp.asarray(checkpoint.x)
+        config = {**config, FINGERPRINT: fingerprint}
         opt_state = restore_opt_state(checkpoint.opt_state_leaves, opt_state)
         history = checkpoint.history
     elif directory is not None:
+        config = {**config, FINGERPRINT: fingerprint}
         directory.mkdir(parents=True, exist_ok=True)
         if (directory / CHECKPOINT).exists():
             raise CheckpointError(
@@ -310,7 +344,34 @@ def _beta_schedule(beta) -> Callable:
 
 def _save(directory, iteration, x, opt_state, history, config):
     leaves = tuple(jax.device_get(leaf) for leaf in jax.tree_util.tree_leaves(opt_state))
-    save_checkpoint(directory / CHECKPOINT, Checkpoint(iteration, jax.device_get(x), leaves, history, config))
+    config = dict(config)
+    fingerprint = config.pop(FINGERPRINT, None)  # carried in `config` inside the driver; stored beside it
+    save_checkpoint(directory / CHECKPOINT, Checkpoint(iteration, jax.device_get(x), leaves, history, config,
+                                                       fingerprint))
+
+
+# The key of the fingerprints in the driver's config (stored as the checkpoint's `fingerprint`; see `_check_resume`).
+FINGERPRINT = "_fingerprint"
+_WHAT = {"objective": "objective (case, mesh, body data, filter, projection, method or tolerances)",
+         "constraints": "constraints (bounds, filters, projections)", "optimizer": "optimizer settings"}
+
+
+def _check_resume(checkpoint: Checkpoint, given: dict, fingerprint: dict, force: bool, directory) -> None:
+    """The settings agree with the checkpoint's, and (unless `force`) so do the fingerprints of the objects."""
+    stored_print = checkpoint.fingerprint
+    _check_config(checkpoint.config, given)
+    if force or not isinstance(stored_print, dict):  # checkpoints written before fingerprints: settings only
+        return
+    differ = [key for key in ("objective", "constraints", "optimizer")
+              if stored_print.get(key) is not None and fingerprint.get(key) is not None
+              and stored_print.get(key) != fingerprint.get(key)]
+    if differ:
+        raise CheckpointError(
+            f"Cannot resume {directory}: the checkpoint was made with another " + " and another ".join(
+                _WHAT[key] for key in differ) + " than this run's. Resume with the objects the run was made with, "
+            "start a new run in another directory, or pass force_resume=True (ffr-jax optimize --force-resume) to "
+            "continue this checkpoint with the objects given now."
+        )
 
 
 def _check_config(stored: dict, given: dict) -> None:

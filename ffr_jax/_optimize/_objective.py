@@ -9,6 +9,7 @@ from .._case import Case
 from .._sensitivity._base import AbstractSensitivity
 from .._design.filter import DensityFilter
 from .._design.stacked import StackedFilter
+from ._fingerprint import tree_fingerprint
 from ._conditions import OperatingConditions
 from ._projection import HeavisideProjection
 
@@ -115,4 +116,8 @@ def make_objective(case: Case | OperatingConditions, method: str | AbstractSensi
         def fun(x):
             return _api.value_and_grad(case, x, method, **kwargs)
 
-    return filtered_objective(fun, filter, projection)
+    out = filtered_objective(fun, filter, projection)
+    # What defines this objective, for the checkpoints of fj.optimize: a resume of a run made with
+    # another case, mesh, filter, projection, method or tolerance is refused.
+    out.fingerprint = tree_fingerprint((case, filter, projection, method, tuple(sorted(kwargs.items()))))
+    return out
