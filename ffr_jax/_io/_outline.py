@@ -68,6 +68,8 @@ def _quad_outline(mesh: QuadMesh, density, level: float) -> list[np.ndarray]:
     from matplotlib.path import Path as MplPath
     from matplotlib.tri import Triangulation
 
+    # Each quad is split into four triangles about its centroid, which carries the element's density; a
+    # node carries the area-weighted mean of its elements' densities (so a fully solid part is 1 everywhere).
     areas = mesh.element_areas()
     weight = np.zeros(mesh.n_nodes)
     total = np.zeros(mesh.n_nodes)
@@ -80,9 +82,9 @@ def _quad_outline(mesh: QuadMesh, density, level: float) -> list[np.ndarray]:
     corners = mesh.elements
     triangles = np.concatenate([np.stack([centres, corners[:, k], corners[:, (k + 1) % 4]], axis=1)
                                 for k in range(4)])
-    top = max(1.0, float(values.max())) + 1.0  # above every value: the region is {value >= level}
     if values.max() < level:
         return []
+    top = float(values.max()) + 1.0  # above every value: the filled band [level, top] is {value >= level}
     contours = Figure().subplots().tricontourf(Triangulation(points[:, 0], points[:, 1], triangles), values,
                                                levels=[level, top])
     loops = []
