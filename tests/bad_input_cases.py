@@ -320,6 +320,26 @@ def _rod_with_detached_piece() -> fj.DesignedBody:
                            fj.ModalReduction(2, fj.HingedHinged(a, b), solver=fj.DenseModes()), (a, b))
 
 
+def _rod_with(extra_nodes=(), extra_elements=(), height=0.06, element=None, solver=None) -> fj.DesignedBody:
+    """The small rod (4 x 2 elements, 2 hinged-hinged modes, markers A and B) with extra nodes and elements
+    (indices of the extra nodes counted from the rod's node count)."""
+    grid = fj.StructuredGrid(4, 2, 1.0, height)
+    nodes, elements = np.asarray(grid.nodes), np.asarray(grid.elements)
+    n = len(nodes)
+    extra = [[node if node >= 0 else n - 1 - node for node in e] for e in extra_elements]  # -1: the first extra node
+    mesh = fj.QuadMesh(np.vstack([nodes, *([np.asarray(extra_nodes)] if len(extra_nodes) else [])]),
+                       np.vstack([elements, *([np.asarray(extra)] if extra else [])]))
+    a, b = fj.rod_joint_nodes(4, 2)
+    return fj.DesignedBody(fj.FEModel(mesh, element or fj.Q4(), 0.01, 0.3), fj.DesignDomain(mesh), fj.SIMP(),
+                           fj.ModalReduction(2, fj.HingedHinged(a, b), solver=solver or fj.DenseModes()), (a, b))
+
+
+def _rod_with_flap() -> fj.DesignedBody:
+    """A 0.1 m square element hinged at the rod's top right corner node (1, 0.03) alone: a mechanism."""
+    corner = 3 * 5 - 1  # StructuredGrid(4, 2): node (i, j) = i * 3 + j, the corner (4, 2)
+    return _rod_with([[1.1, 0.03], [1.1, 0.13], [1.0, 0.13]], [[corner, -1, -2, -3]])
+
+
 def _detached_case(c: Ctx) -> fj.Case:
     """The small case's problem with the detached-piece rod as its designed body (its scene's template data
     come from the healthy rod: the data have the same shapes, so the case is accepted and the design map
@@ -344,6 +364,17 @@ API_32 += [
     # guards the modes as well as the eigenvalues, so every path that builds body data refuses the body.
     Bad("detached piece: uniform_body_data()", lambda c: _rod_with_detached_piece().uniform_body_data(), DE,
         _MECHANISM, "modal check (compiled)"),
+    Bad("detached piece, LanczosModes: uniform_body_data()", lambda c: _rod_with(
+        [[0.4, 0.2], [0.5, 0.2], [0.5, 0.3], [0.4, 0.3]], [[-1, -2, -3, -4]], solver=fj.LanczosModes()
+    ).uniform_body_data(), DE, _MECHANISM, "modal check (Lanczos, compiled)"),
+    Bad("flap hinged at one node: uniform_body_data()", lambda c: _rod_with_flap().uniform_body_data(), DE,
+        _MECHANISM, "modal check (compiled)"),
+    # Q4 locks by a factor 3.4e5 at this aspect ratio, QM6 gives a negative omega^2: both are round-off (the lowest
+    # eigenvalue at 5e-15 and -8e-16 of the stiffness scale, see ffr_jax._design.modal.base.check_modes).
+    Bad("rod of 1e6-aspect elements (Q4): uniform_body_data()", lambda c: _rod_with(height=1e-6).uniform_body_data(),
+        DE, _MECHANISM, "modal check (compiled)"),
+    Bad("rod of 1e6-aspect elements (QM6): uniform_body_data()", lambda c: _rod_with(
+        height=1e-6, element=fj.QM6()).uniform_body_data(), DE, _MECHANISM, "modal check (compiled)"),
     Bad("detached piece: case.body_data(x)", lambda c: _at_half(_detached_case(c), "body_data"), DE, _MECHANISM,
         "modal check"),
     Bad("detached piece: fj.objective(case, x)", lambda c: fj.objective(*_at_half(_detached_case(c))), DE, _MECHANISM,

@@ -87,6 +87,20 @@ def test_every_issue_item_has_a_row():
     assert not set(items) - names, set(items) - names
 
 
+def test_every_issue_32_item_has_a_row():
+    """The rows of issue 32 that this table checks (the run folder and CLI stop messages are in
+    tests/test_run_folder.py; NumPy integers below)."""
+    names = {b.name for b in API} | {b.name for b in CLI}
+    items = ["Revolute(marker_j=7) on a body with 2 markers", "GroundRevolute(body=-1)", "SpringDamper on marker 9",
+             "MarkerTracking(body=0, marker=9)", "Revolute to body 2 of 2", "detached piece: fj.objective(case, x)",
+             "detached piece: uniform_body_data()", "negative modal stiffness (eqx.tree_at) -> Problem()",
+             "HeavisideProjection beta = inf", "fj.optimize(beta=inf)", "FiniteDifferences(step=1e-12) at rtol 1e-10",
+             "--resume a slider-crank run as link-four-bar", "optimize --mass-max nan", "optimize --out ''",
+             "SpringDamper(stiffness=nan)", "Gravity((0, nan))", "ConstantSpeedLaw(nan)",
+             "FunctionConstraint with a NaN bound", "MMA with x0 of the wrong length"]
+    assert not set(items) - names, set(items) - names
+
+
 # --- what must work -------------------------------------------------------------------------------
 
 def test_user_jit_error_reads_the_package_message_first(ctx, caplog):
