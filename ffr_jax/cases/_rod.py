@@ -1,6 +1,7 @@
 """The flexible rod of REFERENCE_CASE §1–2 as a designed body (the cases' flexible part)."""
 
-from .._checks import integer
+import numpy as np
+
 from .._design.assembly import FEModel
 from .._design.designed_body import DesignedBody
 from .._design.element.q4 import Q4
@@ -32,10 +33,8 @@ def rod_body(nx: int = 100, ny: int = 6, n_modes: int = 6, *, length: float = 1.
     """
     # NumPy integers (np.int64(12), a value from np.arange) are integers too; as Python ints they hash as
     # the static mesh sizes and mode counts of the compiled programs.
-    nx = integer(nx, "nx", 1)
-    ny = integer(ny, "ny", 1)
-    n_modes = integer(n_modes, "n_modes", 1)
-    if nx < 4:
+    nx, ny, n_modes = (int(v) if isinstance(v, np.integer) else v for v in (nx, ny, n_modes))
+    if not isinstance(nx, int) or nx < 4:
         raise ValueError(f"nx must be at least 4 (two solid end columns and design columns), got {nx!r}.")
     a, b = rod_joint_nodes(nx, ny)
     domain = rod_domain(nx, ny, length, height)
