@@ -207,8 +207,10 @@ def test_dense_and_lanczos_modes_give_the_same_psi_and_gradient():
     dense = fj.cases.slider_crank(12, 2, 4, 0.2, modal_solver=fd.DenseModes())
     lanczos = fj.cases.slider_crank(12, 2, 4, 0.2, modal_solver=fd.LanczosModes())
     x = jnp.asarray(np.random.default_rng(4).uniform(0.2, 0.95, dense.n_design))
-    psi_d, grad_d = fj.value_and_grad(dense, x)
-    psi_l, grad_l = fj.value_and_grad(lanczos, x)
+    # The paper's adjoint at its tolerances (the default route would pick the discrete adjoint at rtol 1e-7 for this
+    # 0.2 s span, whose step sequence the 1e-12 differences between the modal solvers can change).
+    psi_d, grad_d = fj.value_and_grad(dense, x, "adjoint")
+    psi_l, grad_l = fj.value_and_grad(lanczos, x, "adjoint")
     assert_close_relative(psi_l, psi_d, 1e-9, "psi")
     assert_close_relative(grad_l, grad_d, 1e-8, "adjoint gradient of psi")
 
