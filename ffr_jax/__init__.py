@@ -38,8 +38,13 @@ from ._objective._combine import Scaled as Scaled, Sum as Sum
 from ._objective._compliance import Compliance as Compliance
 from ._objective._function import FunctionIntegrand as FunctionIntegrand
 from ._objective._kinetic_energy import KineticEnergy as KineticEnergy
+from ._objective._joint_load import JointLoad as JointLoad
 from ._objective._objective import Objective as Objective
 from ._objective._tracking import AbstractPath as AbstractPath, FixedPoint as FixedPoint, FunctionPath as FunctionPath, LinearPath as LinearPath, MarkerTracking as MarkerTracking
+from ._outputs._accelerations import redundant_accelerations as redundant_accelerations
+from ._outputs._along_motion import accelerations as accelerations, joint_forces as joint_forces
+from ._outputs._joint_forces import JointForce as JointForce, joint_forces_at as joint_forces_at, joint_names as joint_names
+from ._outputs._multipliers import constraint_multipliers as constraint_multipliers
 from ._problem import Problem as Problem
 from ._scene._angle_driver import AngleDriver as AngleDriver
 from ._scene._applied_force import AppliedForce as AppliedForce
