@@ -132,20 +132,21 @@ def test_hinge_first_acceleration_is_eulers_equation():
     data = fj.spatial_rigid_body_data(m, [0.0, m * l, 0.0], j_origin, [[0.0, 0.0, 0.0]])
     scene = fj.Scene(bodies=(fj.Body("link", data),), constraints=(fj.SpatialRevolute(0, 0, (1.0, 0.0, 0.0)),),
                      forces=(fj.Gravity((0.0, 0.0, -G)),))
-    problem = fj.Problem(scene, 1.0, positions=np.array([0, 0, 0, 1.0, 0, 0, 0]), objective=fj.KineticEnergy())
-    assert problem.n_independent == 2  # the hinge angle and the radial (gauge) direction of p
-    omega_dot = _initial_angular_acceleration(problem)
+    positions = np.array([0, 0, 0, 1.0, 0, 0, 0])
+    partition = fj.choose_partition(scene, 0.0, positions)
+    assert partition.independent == (3, 4)  # e0 (gauge) and e1 (the hinge angle): regular at every angle
+    model = fj.MinimalModel(partition=partition, reference_dependent=jnp.asarray(positions[list(partition.dependent)]))
+    omega_dot = _initial_angular_acceleration(model, scene, jnp.asarray(positions[3:5]), jnp.zeros(2))
     expected = m * G * l / j_origin[0, 0]
     np.testing.assert_allclose(omega_dot, [-expected, 0.0, 0.0], atol=ROUND_OFF * expected)
 
 
 @eqx.filter_jit
-def _initial_angular_acceleration(problem):
-    model, scene = problem.model, problem.scene
+def _initial_angular_acceleration(model, scene, y0, z0):
     t0 = jnp.zeros(())
-    y_r, _, zdot = model.state_and_accelerations(t0, problem.y0, problem.z0, scene)
+    y_r, _, zdot = model.state_and_accelerations(t0, y0, z0, scene)
     # At rest gamma = 0, so the redundant accelerations are J zdot with J = dz_r/dz (paper eq. 13).
-    jac = jax.jacfwd(lambda zz: model.velocities(t0, y_r, zz, scene))(problem.z0)
+    jac = jax.jacfwd(lambda zz: model.velocities(t0, y_r, zz, scene))(z0)
     return angular_velocity(y_r[3:], jac[3:] @ zdot)  # at rest omega'dot = 2 G pddot / |p|^2
 
 
