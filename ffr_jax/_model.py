@@ -1,8 +1,9 @@
 """Minimal-coordinate equations of motion by coordinate partitioning (paper eqs. 10–18).
 
 The redundant coordinates `y_r` of a [`Scene`][] are split into independent `y` and dependent
-`y_d` (paper eq. 10, `B` a permutation; in the plane `Z = I`, so `z_r = dy_r/dt`). Given
-`(t, y, z)`:
+`y_d` (paper eq. 10, `B` a permutation; in the plane `Z = I`, so `z_r = dy_r/dt`; a rigid spatial body's
+velocities are the rates `(Rdot, pdot)` of its position and Euler parameters, so `Z = I` there too, see
+`ffr_jax._spatial._rigid_body`). Given `(t, y, z)`:
 
 1. `y_d` solves `c(B[y; y_d], t, p) = 0` by Newton's method, differentiated implicitly;
 2. `z_d = -C_d^-1 (C_i z + c_t)` (velocity constraints, eq. 11);
