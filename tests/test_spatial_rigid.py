@@ -164,6 +164,11 @@ def test_zero_length_axis_and_bad_spatial_input():
     scene = fj.Scene(bodies=(fj.Body("top", data),), constraints=(fj.SphericalJoint(0, 0),), forces=(fj.Gravity(),))
     with pytest.raises(ValueError, match=r"needs a \(3,\) acceleration"):
         scene.applied_forces(0.0, jnp.array([0, 0, 0, 1.0, 0, 0, 0]), jnp.zeros(7))
+    assert scene.coordinate_names() == ("top.R_x", "top.R_y", "top.R_z", "top.e0", "top.e1", "top.e2", "top.e3")
+    planar = fj.Body("link", fj.rigid_body_data(1.0, [0.0, 0.0], 0.1, [[0.0, 0.0]]))
+    mixed = fj.Scene(bodies=(fj.Body("top", data), planar), constraints=(fj.SphericalJoint(0, 0, 1, 0),))
+    with pytest.raises(ValueError, match="is planar"):
+        mixed.constraint_residual(0.0, jnp.zeros(10))
 
 
 # --- the heavy symmetric top -----------------------------------------------------------------------

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 from .._scene._base import AbstractConstraint
 from .._scene._laws import AbstractLaw, as_law
 from ._revolute import unit_axis
+from ._spherical import require_spatial
 
 
 class SpatialAngleDriver(AbstractConstraint):
@@ -37,6 +38,7 @@ class SpatialAngleDriver(AbstractConstraint):
         return 1
 
     def residual(self, t, y_r, scene):
+        require_spatial(scene, (self.body,), "SpatialAngleDriver")
         p = scene.body_coordinates(self.body, y_r)[3:7]
         half = 0.5 * self.angle(t)
         return (jnp.sin(half) * p[0] - jnp.cos(half) * (self.axis @ p[1:]))[None]
@@ -59,5 +61,6 @@ class EulerNormalisation(AbstractConstraint):
 
     def residual(self, t, y_r, scene):
         del t
+        require_spatial(scene, (self.body,), "EulerNormalisation")
         p = scene.body_coordinates(self.body, y_r)[3:7]
         return (p @ p - 1.0)[None]

@@ -6,7 +6,7 @@ import numpy as np
 
 from .._scene._base import AbstractConstraint
 from ._euler_parameters import rotation_matrix
-from ._spherical import ground_point, other_point
+from ._spherical import ground_point, other_point, require_spatial
 
 
 def unit_axis(axis, name: str) -> np.ndarray:
@@ -66,6 +66,7 @@ class SpatialRevolute(AbstractConstraint):
         return 5
 
     def residual(self, t, y_r, scene):
+        require_spatial(scene, (self.body_i, self.body_j), "SpatialRevolute")
         position = scene.marker_position(self.body_i, self.marker_i, y_r) - other_point(self, t, y_r, scene)
         a_i = rotation_matrix(scene.body_coordinates(self.body_i, y_r)[3:7]) @ self.axis_i
         b = self.normals_j if self.body_j < 0 else self.normals_j @ rotation_matrix(

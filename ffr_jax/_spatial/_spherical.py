@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._scene._base import AbstractConstraint
+from ._body_data import SpatialBodyData
 
 
 def ground_point(point, name: str):
@@ -13,6 +14,14 @@ def ground_point(point, name: str):
     if value.shape != (3,) or not np.all(np.isfinite(value)):
         raise ValueError(f"{name} ground point must be a finite (3,) vector, got {point!r}.")
     return jnp.asarray(value)
+
+
+def require_spatial(scene, bodies, name: str) -> None:
+    """A `ValueError` (at trace time) when one of `bodies` (ground: negative) is not a spatial body."""
+    for b in bodies:
+        if b >= 0 and not isinstance(scene.bodies[b].data, SpatialBodyData):
+            raise ValueError(f"{name} joins spatial bodies, but body {b} ({scene.bodies[b].name!r}) is planar: give it "
+                             "ffr_jax.spatial_rigid_body_data, or use the planar joints (Revolute, GroundRevolute).")
 
 
 def other_point(joint, t, y_r, scene):
@@ -45,4 +54,5 @@ class SphericalJoint(AbstractConstraint):
         return 3
 
     def residual(self, t, y_r, scene):
+        require_spatial(scene, (self.body_i, self.body_j), "SphericalJoint")
         return scene.marker_position(self.body_i, self.marker_i, y_r) - other_point(self, t, y_r, scene)
