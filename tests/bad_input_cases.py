@@ -428,9 +428,12 @@ API_32 += [
         "FunctionConstraint 'function': bound must be finite", "FunctionConstraint()"),
     # A broadcasting TypeError inside MMA's update after 11 s before; now before anything compiles (the
     # objective's gradient shape from jax.eval_shape).
-    Bad("MMA with x0 of the wrong length", lambda c: fj.optimize(lambda x: (jnp.sum(x), jnp.ones(4)), jnp.full(3, 0.5),
-                                                               fj.MMA(), iterations=1), V,
-        r"x0 has shape \(3,\), but the objective's gradient has shape \(4,\)", "optimize() entry"),
+    Bad("MMA with x0 of the wrong length", lambda c: fj.optimize(fj.make_objective(c.case), jnp.full(3, 0.5), fj.MMA(),
+                                                               fj.VolumeConstraint(0.5), iterations=1), V,
+        r"x0 has 3 densities, but the objective's case has 4", "optimize() entry"),
+    Bad("MMA with x0 of the wrong length, a user's objective", lambda c: fj.optimize(
+        lambda x: (jnp.sum(x), jnp.ones(4)), jnp.full(3, 0.5), fj.MMA(), iterations=1), V,
+        r"gradient has shape \(4,\), but the design x has shape \(3,\)", "optimize() step trace"),
 ]
 API += API_32
 

@@ -153,6 +153,7 @@ def _optimize(fun, x0, optimizer, constraints, *, iterations, directory, resume,
     config = json.loads(json.dumps(config or {}, sort_keys=True))
     config.pop(FINGERPRINT, None)  # the driver's own entry, which `_save` stores beside the config
     objective_print = getattr(fun, "fingerprint", None)  # set by make_objective; None for a user's function
+    design_size = getattr(fun, "design_size", None)  # likewise: the case's number of densities
     beta_of = _beta_schedule(beta)
     unravel = None
     if not is_flat(x0):  # a design of several bodies: one flat vector inside the loop
@@ -204,7 +205,7 @@ def _optimize(fun, x0, optimizer, constraints, *, iterations, directory, resume,
         _write_log(directory / LOG, history)
         log = open(directory / LOG, "a")
     step = make_step(fun, optimizer, constraints)
-    _check_gradient_shape(step, x, beta_of(history.steps))
+    _check_design_size(design_size, x)
     bar = Progress(iterations, history.steps, progress)
     if history.steps < iterations:
         bar.compiling()
@@ -314,20 +315,16 @@ def _postfix(value, volume, change, g) -> str:
     return text + f" change {change:.2e}"
 
 
-def _check_gradient_shape(step, x, beta) -> None:
-    """The objective's gradient has the design's shape, or a `ValueError` before anything is compiled.
-
-    `jax.eval_shape` traces the objective (a fraction of its compile time) but compiles and runs
-    nothing; an `x0` of the wrong length otherwise failed inside the optimizer's update, after the
-    objective had compiled, with a broadcasting `TypeError`.
-    """
-    shapes = jax.eval_shape(step.objective, x, beta)
-    grad_shape = tuple(shapes[1].shape) if isinstance(shapes, tuple) and len(shapes) == 2 else None
-    if grad_shape != tuple(x.shape):
+def _check_design_size(design_size, x) -> None:
+    """`x0` has the number of densities of the objective's case ([`make_objective`][] records it), or a
+    `ValueError` before anything is compiled. (For a user's function, the step checks the gradient's shape
+    against the design's when it is traced, `ffr_jax._optimize._step`.) An `x0` of the wrong length
+    otherwise failed inside the optimizer's update, after the objective had compiled, with a
+    broadcasting `TypeError`."""
+    if design_size is not None and x.size != design_size:
         raise ValueError(
-            f"The start design x0 has shape {tuple(x.shape)}, but the objective's gradient has shape {grad_shape}: "
-            "x0 must be a design of the case the objective was made from (e.g. case.initial_design(0.5), "
-            "with case.n_design variables)."
+            f"The start design x0 has {x.size} densities, but the objective's case has {design_size}: x0 must be a "
+            "design of the case the objective was made from (e.g. case.initial_design(0.5))."
         )
 
 

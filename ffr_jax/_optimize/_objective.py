@@ -120,4 +120,5 @@ def make_objective(case: Case | OperatingConditions, method: str | AbstractSensi
     # What defines this objective, for the checkpoints of fj.optimize: a resume of a run made with
     # another case, mesh, filter, projection, method or tolerance is refused.
     out.fingerprint = tree_fingerprint((case, filter, projection, method, tuple(sorted(kwargs.items()))))
+    out.design_size = (case.case if isinstance(case, OperatingConditions) else case).n_design  # checked by optimize
     return out

@@ -123,6 +123,9 @@ class _Identity:
 @functools.partial(jax.jit, static_argnames="rule")
 def _advance(x, state, value, grad, beta, *, rule):
     optimizer, constraints, volume = rule.value
+    if jnp.shape(grad) != jnp.shape(x):  # static shapes: a clear message at trace time, not a broadcasting error
+        raise ValueError(f"The objective's gradient has shape {jnp.shape(grad)}, but the design x has shape "
+                         f"{jnp.shape(x)}: x0 must be a design of the objective's case (e.g. case.initial_design(0.5)).")
     g, dg = evaluate_constraints(constraints, x, beta)
     x_new, state = optimizer.update(x, state, value, grad, g, dg, beta)
     fraction = jnp.full((), jnp.nan, x.dtype) if volume is None else volume.fraction(x_new, beta)
