@@ -81,7 +81,7 @@ _SHARED_PROGRAMS = ("test_sensitivity", "test_hard_cases", "test_adjoint_quadrat
 _LONGEST_FIRST = ("family", "test_problem", "test_two_links", "test_notebooks", "test_design_map", "test_conditions",
                   "test_design_modes", "test_dynamics", "test_spatial_gradient", "test_optimize", "test_io", "test_outputs_any_mesh", "test_cli_user_case", "test_optimize_defaults",
                   "test_design_invariant",
-                  "test_stiff_route", "test_mma", "test_solvers", "test_accelerations_derivative", "test_discrete_adjoint",
+                  "test_stiff_route", "test_mma", "test_solvers", "test_accelerations_derivative", "test_reactions", "test_discrete_adjoint",
                   "test_bad_input_fuzz", "test_simulation_errors", "test_spatial_rigid", "test_spatial_loop", "test_effects",
                   "test_link_four_bar", "test_constraints", "test_design_body_data", "test_design_geometry",
                   "test_bad_input", "test_two_links_optimize", "test_design_mesh", "test_design_filter",
