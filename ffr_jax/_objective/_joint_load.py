@@ -39,7 +39,7 @@ class JointLoad(AbstractIntegrand):
     quantity: str = eqx.field(static=True)
     power: float = eqx.field(static=True)
 
-    def __init__(self, target, joint: str | int, quantity: str = "torque", power: float = 2.0):
+    def __init__(self, target, joint: str | int, quantity: str = "torque", power: float | int = 2.0):
         from .._case import Case
         from .._problem import Problem
 
