@@ -15,12 +15,13 @@ message first ([`clean_errors`][]).
 
 import diffrax
 import equinox as eqx
+import numpy as np
 
 from . import _checks
 from ._case import Case
 from ._compiled import Program, logger
 from ._errors import clean_errors
-from ._problem import Problem
+from ._problem import Problem, check_scene_data
 from ._scene._scene import Scene
 from ._sensitivity._adjoint import Adjoint
 from ._sensitivity._autodiff import Autodiff
@@ -69,6 +70,19 @@ def _check_target(target) -> None:
     if not isinstance(target, (Case, Problem)):
         raise ValueError(f"Expected an ffr_jax.Problem or a case (e.g. ffr_jax.cases.slider_crank()), "
                          f"got {type(target).__name__}.")
+    if isinstance(target, Problem):  # data edited with eqx.tree_at after the problem was built (issue 32)
+        check_scene_data(target.scene)
+
+
+def _check_ts(ts) -> None:
+    """Output times, where known on the host: finite and non-decreasing."""
+    if ts is None or _checks.is_traced(ts):
+        return
+    values = np.asarray(ts, dtype=float)
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"ffr_jax.simulate: the output times ts must be finite, got {values}.")
+    if np.any(np.diff(values) < 0):
+        raise ValueError("ffr_jax.simulate: the output times ts must be non-decreasing.")
 
 
 def _check_options(where: str, rtol, atol, max_steps) -> None:
@@ -168,7 +182,9 @@ def simulate(target, *args, solver: diffrax.AbstractSolver | None = None, rtol: 
     velocities at the output times, and `psi`.
     """
     _check_options("ffr_jax.simulate", rtol, atol, max_steps)
+    _check_ts(ts)
     if isinstance(target, Problem):
+        _check_target(target)
         if args or kwargs:
             raise ValueError("simulate(problem, ...) takes only keyword options (solver, rtol, atol, ts, ...).")
         return _simulate_problem(target, solver, rtol, atol, ts, dense, max_steps, adjoint, dt0)

@@ -386,6 +386,12 @@ API_32 += [
     Bad("negative modal stiffness (eqx.tree_at) -> Problem()", lambda c: fj.Problem(
         _negative_stiffness(c), 0.1, positions=c.case.problem.y_r0, objective=fj.Compliance(0)), V,
         "modal_stiffness must be positive semi-definite", "Problem()"),
+    Bad("negative modal stiffness (eqx.tree_at on a built problem) -> fj.objective(problem)", lambda c: fj.objective(
+        eqx.tree_at(lambda p: p.scene, c.case.problem, _negative_stiffness(c))), V,
+        r"Body 0 \('rod'\) of the scene: BodyData.modal_stiffness must be positive semi-definite", "objective() entry"),
+    # Newton's "cannot assemble ... check the scene geometry" before.
+    Bad("NaN output times", lambda c: fj.simulate(c.case, c.x, ts=jnp.array([0.0, NAN])), V,
+        "output times ts must be finite", "simulate() entry"),
 ]
 _BETA = "beta must be a finite positive number"
 API_32 += [
