@@ -45,6 +45,7 @@ from ._outputs._accelerations import redundant_accelerations as redundant_accele
 from ._outputs._along_motion import accelerations as accelerations, joint_forces as joint_forces
 from ._outputs._joint_forces import JointForce as JointForce, joint_forces_at as joint_forces_at, joint_names as joint_names
 from ._outputs._multipliers import constraint_multipliers as constraint_multipliers
+from ._outputs._stresses import modal_stresses as modal_stresses, stress_modes as stress_modes, stresses as stresses, von_mises as von_mises
 from ._problem import Problem as Problem
 from ._scene._angle_driver import AngleDriver as AngleDriver
 from ._scene._applied_force import AppliedForce as AppliedForce
