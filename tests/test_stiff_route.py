@@ -142,7 +142,7 @@ def test_value_and_grad_check_raises_on_a_wrong_gradient(case, x, explicit, monk
     import ffr_jax._api as api
 
     compiled = api._value_and_grad_design
-    monkeypatch.setattr(api, "_value_and_grad_design", lambda *a: (lambda p, g: (p, -g))(*compiled(*a)))
+    monkeypatch.setattr(api, "_value_and_grad_design", lambda *a, **kw: (lambda p, g: (p, -g))(*compiled(*a, **kw)))
     with pytest.raises(ValueError, match="Untrustworthy gradient"):
         fj.value_and_grad(case, x, "autodiff", rtol=RTOL, atol=ATOL, check=True)
 
