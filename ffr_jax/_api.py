@@ -267,7 +267,9 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
       `ValueError` saying so where they disagree. Every method differentiates a discrete solution;
       autodiff through an explicit solver at its stability limit (many retained modes) can return
       the derivative of the discrete solution with wrong signs (benchmarks/RESULTS.md, "How many
-      modes"). Not under `jax.jit`/`jax.vmap` (it needs the values).
+      modes"). Not under `jax.jit`/`jax.vmap` (it needs the values). On by default for `"autodiff"`
+      with the default solver where [`choose_route`][] finds the problem stiff (Dopri8 at its
+      stability limit), so that such a gradient is right or raises.
 
     **Returns:** `(psi, grad)`: for a case, `grad` has the structure of `x` (a dict of arrays for a
     dict design, one forward and one backward solve for all bodies); for a problem, a
@@ -296,6 +298,11 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
         return _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps, detail=detail)
     x = _design(target, x, "value_and_grad")
     psi, grad = _value_and_grad_design(target, x, method, rtol, atol, solver, max_steps, detail=detail)
+    if not check and isinstance(method, Autodiff) and solver is None and not _checks.is_traced(x):
+        # Autodiff through the explicit default solver at its stability limit can return the derivative of the
+        # discrete solution with wrong signs (20 modes on the 12 x 2 rod: 530x off, benchmarks/RESULTS.md, "Every
+        # method at 20 modes"): there the gradient is checked by default, so it is right or raises (issue 32).
+        check = choose_route(target).stiff
     if check:
         from ._gradient_check import check_gradient
 

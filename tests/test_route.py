@@ -100,3 +100,33 @@ def test_public_functions_run_programs_that_say_when_they_compile():
     for name in ("_simulate_problem", "_simulate_case", "_value_and_grad_problem", "_value_and_grad_design",
                  "_value_and_grad_scene"):
         assert isinstance(getattr(_api, name), Program), name
+
+
+@pytest.fixture(scope="module")
+def probe_20_modes():
+    """Issue 32's probe: 20 modes on the 12 x 2 rod over 0.2 s (highest mode ~tens of kHz: stiff), at x = 0.5,
+    with psi's directional derivative along a fixed +-1 direction by central differences at rtol 1e-12."""
+    case = fj.cases.slider_crank(12, 2, 20, 0.2)
+    x = case.initial_design(0.5)
+    d = np.random.default_rng(0).choice([-1.0, 1.0], size=case.n_design)
+    h = 1e-4
+    psi = [float(fj.objective(case, x + s * h * d, rtol=1e-12, atol=1e-16)) for s in (1, -1)]
+    return case, x, d, (psi[0] - psi[1]) / (2 * h)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["adjoint", "autodiff", "backsolve", "direct", "discrete-adjoint", None])
+def test_every_method_at_20_modes_is_right_or_raises(probe_20_modes, method):
+    """Every method with its default settings is right (its directional derivative within 1e-4 of max |g| |d|_1
+    of the central difference, which is good to ~1e-8 there: step 1e-4, psi at rtol 1e-12) or raises.
+
+    Autodiff through Dopri8 at its stability limit returned a gradient 530x too large here (benchmarks/RESULTS.md,
+    "Every method at 20 modes against finite differences"); it is now checked by default and raises."""
+    case, x, d, fd = probe_20_modes
+    try:
+        _, grad = fj.value_and_grad(case, x, method)
+    except ValueError as err:
+        assert method == "autodiff" and "Untrustworthy gradient" in str(err), f"{method}: {err}"
+        return
+    g = np.asarray(grad)
+    assert abs(float(g @ d) - fd) <= 1e-4 * np.max(np.abs(g)) * np.sum(np.abs(d)), (method, float(g @ d), fd)
