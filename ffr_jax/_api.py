@@ -242,9 +242,9 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
       when the case designs one body; or a [`Problem`][] (no `x`).
     - `method`: `None` (default): the route [`choose_route`][] picks from the retained frequencies and
       the time span — the discrete adjoint of Rodas5P at rtol 1e-7 where an explicit solver would sit
-      at its stability limit (the reference case: about 1 s, 2.5e-8 of the largest entry from a tight
-      reference), else the paper's adjoint with Dopri8 at rtol 1e-10; the route is logged at INFO on
-      the `"ffr_jax"` logger. Or `"adjoint"` (the paper's adjoint variable method), `"autodiff"`
+      at its stability limit (the reference case: 2.3 s on a 2-core machine, 2.5e-8 of the largest entry
+      from a tight reference), else the paper's adjoint with Dopri8 at rtol 1e-10; the route is named in
+      the first call's compile message on the `"ffr_jax"` logger (INFO). Or `"adjoint"` (the paper's adjoint variable method), `"autodiff"`
       (`jax.grad` through diffrax), `"backsolve"` (diffrax `BacksolveAdjoint`), `"direct"`
       (forward sensitivities), `"fd"` (central differences, designs only), `"discrete-adjoint"`
       (the discrete adjoint of a Rosenbrock forward solve, `ffr_jax.DiscreteAdjoint`: the derivative
