@@ -285,6 +285,12 @@ def _two_bodies(c: Ctx, constraints=(), forces=()):
 
 _NOT_A_MARKER = r"is not a marker of body \d .*valid indices are 0 to 1"
 _NOT_A_BODY = r"is not a body of the scene: valid indices are 0 to"
+def _garbage_file(c) -> str:
+    path = c.tmp / "garbage.msh"
+    path.write_bytes(b"garbage\x00\x01 not a mesh")
+    return str(path)
+
+
 API_32 = [
     # Silently wrong before (JAX's gather clamps a marker index to the last marker; a negative body index
     # counts from the end): refused where the element meets the scene, naming the element, index and range.
@@ -389,6 +395,9 @@ API_32 += [
     Bad("negative modal stiffness (eqx.tree_at on a built problem) -> fj.objective(problem)", lambda c: fj.objective(
         eqx.tree_at(lambda p: p.scene, c.case.problem, _negative_stiffness(c))), V,
         r"Body 0 \('rod'\) of the scene: BodyData.modal_stiffness must be positive semi-definite", "objective() entry"),
+    # SystemExit(1) from meshio before.
+    Bad("fj.read_mesh of a garbage file", lambda c: fj.read_mesh(_garbage_file(c)), V,
+        "read_mesh: meshio could not read .* give a mesh file meshio reads", "read_mesh()"),
     # Newton's "cannot assemble ... check the scene geometry" before.
     Bad("NaN output times", lambda c: fj.simulate(c.case, c.x, ts=jnp.array([0.0, NAN])), V,
         "output times ts must be finite", "simulate() entry"),

@@ -12,6 +12,7 @@ nodes `elements[e]`, counter-clockwise.
 """
 
 import hashlib
+import pathlib
 
 import numpy as np
 
@@ -401,7 +402,14 @@ def read_mesh(path) -> QuadMesh:
     """
     import meshio
 
-    return from_meshio(meshio.read(path))
+    if not pathlib.Path(path).is_file():
+        raise FileNotFoundError(f"read_mesh: no mesh file at {str(path)!r}.")
+    try:
+        mesh = meshio.read(path)
+    except (Exception, SystemExit) as err:  # meshio exits (SystemExit) on some unreadable files
+        raise ValueError(f"read_mesh: meshio could not read {str(path)!r} ({type(err).__name__}: {err}); give a "
+                         "mesh file meshio reads (.msh, .vtu, .inp, .med, ...) with its usual extension.") from None
+    return from_meshio(mesh)
 
 
 def write_mesh(path, mesh: QuadMesh, cell_data: dict[str, np.ndarray] | None = None,
