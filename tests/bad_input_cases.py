@@ -515,8 +515,17 @@ CLI_32 = [
     BadCli("optimize --out ''", f"{O} --out=", "--out '' names no directory", "CLI settings"),
     BadCli("optimize --force-resume without --resume", f"{O} --force-resume --out {{tmp}}/o10",
            "--force-resume applies to --resume", "CLI settings"),
+    # numpy's "allow_pickle" advice before.
+    BadCli("export --design garbage.npz", "export slider-crank --design {setup}/garbage.npz --svg {tmp}/g.svg",
+           "garbage.npz is not a design file .* pass the design.npz written by `ffr-jax optimize`", "CLI settings",
+           lambda c: _garbage_npz(c.tmp)),
 ]
 CLI += CLI_32
+
+
+def _garbage_npz(tmp: Path) -> Path:
+    (tmp / "garbage.npz").write_bytes(b"garbage")
+    return tmp
 
 
 def _file(path: Path) -> Path:

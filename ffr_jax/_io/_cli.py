@@ -56,7 +56,15 @@ def _case_and_design(args: argparse.Namespace):
         path = Path(args.design)
         if not path.is_file():
             raise ValueError(f"No design file {path}; pass the design.npz written by `ffr-jax optimize`.")
-        with np.load(path, allow_pickle=False) as stored:
+        try:
+            stored = np.load(path, allow_pickle=False)
+        except (ValueError, OSError, EOFError) as err:  # numpy's own text advises allow_pickle: not ours to give
+            raise ValueError(f"{path} is not a design file ({type(err).__name__}); pass the design.npz written by "
+                             "`ffr-jax optimize`.") from None
+        if not hasattr(stored, "files"):
+            raise ValueError(f"{path} is a single array, not a design file; pass the design.npz written by "
+                             "`ffr-jax optimize`.")
+        with stored:
             if "x_phys" not in stored.files:
                 raise ValueError(f"{path} holds no physical densities (x_phys); pass the design.npz written by "
                                  "`ffr-jax optimize`.")
