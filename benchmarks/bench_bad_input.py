@@ -4,7 +4,7 @@ and the time to fail.
 
 Each row is run twice in one process: the first time (which pays for any compilation the row needs;
 rows run in table order, so a compiled program is paid for by its first row) and again. CLI rows run
-`ffr_jax._cli.main` in this process; one extra row times the real entry point in a subprocess (Python
+`ffr_jax._app._cli.main` in this process; one extra row times the real entry point in a subprocess (Python
 start and JAX import included). A row that does not raise its error, or whose message carries a
 traceback or XLA's wrapper, is marked FAIL (the script then exits 1).
 
@@ -60,7 +60,7 @@ def subprocess_row(tmp):
     path = pathlib.Path(tmp) / "missing" / "psi.json"
     env = dict(os.environ, PYTHONPATH=str(pathlib.Path(__file__).resolve().parent.parent))
     start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-c", "import sys; from ffr_jax._cli import main; sys.exit(main())",
+    result = subprocess.run([sys.executable, "-c", "import sys; from ffr_jax._app._cli import main; sys.exit(main())",
                              "gradient", "slider-crank", "--json", str(path)], capture_output=True, text=True, env=env)
     seconds = time.perf_counter() - start
     line = result.stderr.strip().splitlines()[-1] if result.stderr.strip() else ""

@@ -71,7 +71,7 @@ def cli_timings() -> list[dict]:
         for k in range(2):
             path = pathlib.Path(out) / f"g{k}.json"
             start = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "ffr_jax._cli", "gradient", "slider-crank", "--repeat", "2",
+            subprocess.run([sys.executable, "-m", "ffr_jax", "gradient", "slider-crank", "--repeat", "2",
                             "--json", str(path)], env=env, check=True, capture_output=True, text=True)
             wall = time.perf_counter() - start
             timings = json.loads(path.read_text())["timings"]

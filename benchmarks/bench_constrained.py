@@ -27,7 +27,7 @@ import jax
 import numpy as np
 
 import ffr_jax as fj
-from ffr_jax._cli import main as cli
+from ffr_jax._app._cli import main as cli
 
 
 def main():

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import ffr_jax as fj
-from ffr_jax._cli import main as cli
+from ffr_jax._app._cli import main as cli
 
 ATOL = 1e-15
 

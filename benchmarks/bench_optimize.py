@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 import ffr_jax
-from ffr_jax._cli import main as cli
+from ffr_jax._app._cli import main as cli
 
 
 def main():

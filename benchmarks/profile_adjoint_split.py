@@ -22,7 +22,7 @@ import jax.numpy as jnp
 
 import ffr_jax as fj
 from ffr_jax._sensitivity._adjoint import _quadrature_on_steps
-from ffr_jax._simulate import solve_minimal
+from ffr_jax._dynamics._simulate import solve_minimal
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from _results import timed  # noqa: E402

@@ -30,7 +30,7 @@ import jax.tree_util as jtu
 import ffr_jax as fj
 from ffr_jax._sensitivity._base import forward_solve
 from ffr_jax._sensitivity._discrete_adjoint import _vector_field, step_transpose
-from ffr_jax._small_linalg import lu_factor
+from ffr_jax._dynamics._small_linalg import lu_factor
 from ffr_jax._solver._rosenbrock import rosenbrock_matrix, rosenbrock_stages
 
 

@@ -2,17 +2,13 @@
 
 import jax as _jax
 
-from ._xla_flags import avoid_batched_lapack_deadlock as _avoid_batched_lapack_deadlock
-
-# Before JAX's CPU backend starts: see `_xla_flags` (a deadlock of batched LAPACK kernels under vmap).
-_avoid_batched_lapack_deadlock()
 # float64 throughout: the one place the package sets it.
 _jax.config.update("jax_enable_x64", True)
 
 from . import cases as cases
-from ._errors import DesignError as DesignError, FFRJaxError as FFRJaxError, SimulationError as SimulationError, clean_errors as clean_errors, install_log_filter as _install_log_filter
+from ._errors import DesignError as DesignError, FFRJaxError as FFRJaxError, SimulationError as SimulationError, clean_errors as clean_errors
 from ._api import objective as objective, simulate as simulate, simulate_case as simulate_case, value_and_grad as value_and_grad, value_and_grad_scene as value_and_grad_scene
-from ._case import Case as Case, FlexibleRodCase as FlexibleRodCase
+from ._dynamics._case import Case as Case, FlexibleRodCase as FlexibleRodCase
 from ._design import (
     DESIGN as DESIGN, SOLID as SOLID, VOID as VOID, AbstractDesignMap as AbstractDesignMap,
     AbstractElement as AbstractElement, AbstractModalSolver as AbstractModalSolver,
@@ -26,15 +22,16 @@ from ._design import (
     retained_eigenpairs as retained_eigenpairs, rod_domain as rod_domain, rod_joint_nodes as rod_joint_nodes,
     structured_grid as structured_grid, write_mesh as write_mesh,
 )
-from ._gradient_check import GradientCheck as GradientCheck, check_gradient as check_gradient
-from ._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient, row_signs as row_signs
-from ._io._animation import Animation as Animation, animate as animate, body_motion as body_motion
-from ._io._outline import density_outline as density_outline, write_dxf as write_dxf, write_svg as write_svg
-from ._io._vtu import write_vtu as write_vtu
-from ._io._vtu_series import write_vtu_series as write_vtu_series
-from ._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
+from ._api import check_gradient as check_gradient
+from ._sensitivity._check import GradientCheck as GradientCheck
+from ._app._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient, row_signs as row_signs
+from ._app._animation import Animation as Animation, animate as animate, body_motion as body_motion
+from ._app._outline import density_outline as density_outline, write_dxf as write_dxf, write_svg as write_svg
+from ._app._vtu import write_vtu as write_vtu
+from ._app._vtu_series import write_vtu_series as write_vtu_series
+from ._dynamics._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
 from ._objective._base import AbstractIntegrand as AbstractIntegrand
-from ._objective._combine import Scaled as Scaled, Sum as Sum
+from ._objective._base import Scaled as Scaled, Sum as Sum
 from ._objective._compliance import Compliance as Compliance
 from ._objective._function import FunctionIntegrand as FunctionIntegrand
 from ._objective._kinetic_energy import KineticEnergy as KineticEnergy
@@ -46,7 +43,7 @@ from ._outputs._along_motion import accelerations as accelerations, joint_forces
 from ._outputs._joint_forces import JointForce as JointForce, joint_forces_at as joint_forces_at, joint_names as joint_names
 from ._outputs._multipliers import constraint_multipliers as constraint_multipliers
 from ._outputs._stresses import modal_stresses as modal_stresses, stress_modes as stress_modes, stresses as stresses, von_mises as von_mises
-from ._problem import Problem as Problem
+from ._dynamics._problem import Problem as Problem
 from ._scene._angle_driver import AngleDriver as AngleDriver
 from ._scene._applied_force import AppliedForce as AppliedForce
 from ._scene._base import AbstractConstraint as AbstractConstraint, AbstractForce as AbstractForce
@@ -75,17 +72,17 @@ from ._sensitivity._direct import Direct as Direct
 from ._sensitivity._discrete_adjoint import DiscreteAdjoint as DiscreteAdjoint
 from ._sensitivity._finite_differences import FiniteDifferences as FiniteDifferences
 from ._sensitivity._route import Route as Route, choose_route as choose_route
-from ._sharding import sharded_map as sharded_map
+from ._dynamics._sharding import sharded_map as sharded_map
 from ._solver import Rodas4 as Rodas4, Rodas5P as Rodas5P
-from ._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state
-from ._optimize._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
+from ._dynamics._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state
+from ._app._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
 from ._optimize._conditions import OperatingConditions as OperatingConditions
 from ._optimize._constraint import AbstractDesignConstraint as AbstractDesignConstraint
-from ._optimize._driver import ConstraintViolationWarning as ConstraintViolationWarning, OptimizeResult as OptimizeResult, optimize as optimize
-from ._optimize._step_error import StepBackOffWarning as StepBackOffWarning
+from ._app._driver import ConstraintViolationWarning as ConstraintViolationWarning, OptimizeResult as OptimizeResult, optimize as optimize
+from ._app._step_error import StepBackOffWarning as StepBackOffWarning
 from ._optimize._frequency import FrequencyConstraint as FrequencyConstraint
 from ._optimize._function_constraint import FunctionConstraint as FunctionConstraint
-from ._optimize._history import History as History
+from ._app._history import History as History
 from ._optimize._mass import MassConstraint as MassConstraint
 from ._optimize._mma import MMA as MMA, MMAState as MMAState
 from ._optimize._oc import optimality_criteria as optimality_criteria
@@ -93,8 +90,6 @@ from ._optimize._optimizer import AbstractOptimizer as AbstractOptimizer, Projec
 from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective, physical_densities as physical_densities
 from ._optimize._pytree import OnBody as OnBody
 from ._optimize._projection import HeavisideProjection as HeavisideProjection, beta_continuation as beta_continuation
-from ._optimize._plot import plot_constraints as plot_constraints, plot_design as plot_design, plot_designs as plot_designs, plot_history as plot_history
+from ._app._plot_optimize import plot_constraints as plot_constraints, plot_design as plot_design, plot_designs as plot_designs, plot_history as plot_history
 from ._optimize._step import StepInfo as StepInfo, make_step as make_step
 from ._optimize._volume import VolumeConstraint as VolumeConstraint
-
-_install_log_filter()

@@ -13,7 +13,7 @@ error class it stands for. Such an error leaves XLA wrapped in one of two forms:
 error, [`DesignError`][] or [`SimulationError`][], whose text *is* the message. Around a user's
 own `jax.jit` nothing of the package runs when the program executes, so the exception stays
 XLA's; the log record that jax writes for the failed callback is then shortened to one line
-that names the message (see [`install_log_filter`][]), so that the message is the first thing
+that names the message (see `install_log_filter`, attached by the first public call), so that the message is the first thing
 printed. Wrapping the user's jitted function in [`clean_errors`][] gives the clean error there too.
 """
 
@@ -130,6 +130,7 @@ def clean_errors(fn):
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         __tracebackhide__ = True
+        install_log_filter()  # on the first call of an entry point, not on import
         _enter(1)
         try:
             out = fn(*args, **kwargs)
@@ -185,6 +186,7 @@ _LOGGER = logging.getLogger("jax._src.callback")
 
 
 def install_log_filter() -> None:
-    """Attach the filter to jax's callback logger (idempotent; done when ffr_jax is imported)."""
+    """Attach the filter to jax's callback logger (idempotent; done by the first call of a public entry
+    point, so that `import ffr_jax` leaves logging alone)."""
     if _FILTER not in _LOGGER.filters:
         _LOGGER.addFilter(_FILTER)

@@ -535,7 +535,7 @@ def _file(path: Path) -> Path:
 
 def run_cli(ctx: Ctx, bad: BadCli) -> tuple[int, str, str]:
     """`ffr-jax ARGV` in this process: `(exit status, stdout, stderr)` (argparse's own errors included)."""
-    from ffr_jax._cli import main
+    from ffr_jax._app._cli import main
 
     setup = bad.setup(ctx) if bad.setup is not None else None
     argv = bad.argv.format(tmp=ctx.tmp, setup=setup).split()
@@ -550,7 +550,7 @@ def run_cli(ctx: Ctx, bad: BadCli) -> tuple[int, str, str]:
 
 def strict_json_of(record) -> str:
     """What the CLI writes: strict JSON (no bare NaN), or a clear `ValueError`."""
-    from ffr_jax._cli_checks import finite_record
+    from ffr_jax._app._cli_checks import finite_record
 
     return json.dumps(finite_record(record, "--json out.json"), allow_nan=False)
 

@@ -18,10 +18,10 @@ import pytest
 # slower). The numbers the tests check do not depend on it beyond round-off: every tolerance is argued
 # from the accuracy of its check (tests/TOLERANCES.md), not from one compiler's last bits.
 # FFR_JAX_TEST_XLA_DEFAULTS=1 runs the suite with XLA's defaults instead (as users get them).
-# The package adds its own flag on import (ffr_jax/_xla_flags.py: a deadlock of batched LAPACK kernels
-# under vmap); it is set here too, since a test module could start the backend before importing ffr_jax.
-# (ffr_jax._xla_flags.add_flag cannot be imported here: see the module docstring on the import hook.)
-_FLAGS = ["--xla_cpu_enable_concurrency_optimized_scheduler=false"]  # = ffr_jax._xla_flags.DEADLOCK_FLAG
+# The deadlock guard of the ffr-jax command (ffr_jax/_dynamics/_xla_flags.py: a deadlock of batched LAPACK kernels
+# under vmap) is set here for every test (the tests vmap dense modal analyses; import ffr_jax does not set it).
+# (ffr_jax._dynamics._xla_flags.add_flag cannot be imported here: see the module docstring on the import hook.)
+_FLAGS = ["--xla_cpu_enable_concurrency_optimized_scheduler=false"]  # = ffr_jax._dynamics._xla_flags.DEADLOCK_FLAG
 if not os.environ.get("FFR_JAX_TEST_XLA_DEFAULTS"):
     _FLAGS += ["--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0",
                "--xla_llvm_disable_expensive_passes=true"]

@@ -28,8 +28,8 @@ from helpers import assert_close_relative, random_design, small_case
 
 import ffr_jax as fj
 from ffr_jax._sensitivity._adjoint import _quadrature_on_steps, adjoint_products, adjoint_terms, gauss_legendre
-from ffr_jax._simulate import simulate
-from ffr_jax._small_linalg import matmul
+from ffr_jax._dynamics._simulate import simulate
+from ffr_jax._dynamics._small_linalg import matmul
 
 RTOL, ATOL = 1e-10, 1e-12
 BACKWARD = dict(rtol=1e-10, atol=1e-16)  # two decades tighter than the default, so that the bound below can hold

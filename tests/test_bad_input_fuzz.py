@@ -3,7 +3,7 @@
 Each row of `bad_input_cases.API` is one call that must raise its error class with a message that
 matches (the message comes first: no XLA or equinox wrapper text in front of it, and no library
 traceback); each row of `bad_input_cases.CLI` is one `ffr-jax` command line that must exit with
-status 2 and print one line `ffr-jax: error: ...`. The CLI rows run `ffr_jax._cli.main` in this
+status 2 and print one line `ffr-jax: error: ...`. The CLI rows run `ffr_jax._app._cli.main` in this
 process (a subprocess per row would cost a JAX import each); one subprocess checks the real entry
 point. All rows share one small case and its compiled forward solve (see `bad_input_cases`).
 
@@ -58,10 +58,10 @@ def test_cli_bad_input(ctx, bad):
 
 
 def test_cli_entry_point_in_a_subprocess(tmp_path):
-    """The installed entry point (`ffr_jax._cli:main`): status 2, one line on stderr, before any compilation."""
+    """The installed entry point (`ffr_jax._app._cli:main`): status 2, one line on stderr, before any compilation."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     result = subprocess.run(
-        [sys.executable, "-c", "import sys; from ffr_jax._cli import main; sys.exit(main())",
+        [sys.executable, "-c", "import sys; from ffr_jax._app._cli import main; sys.exit(main())",
          "gradient", "slider-crank", "--json", str(tmp_path / "missing" / "psi.json")],
         capture_output=True, text=True, env=env, timeout=120, cwd=tmp_path)
     assert result.returncode == 2, result.stderr

@@ -1,4 +1,4 @@
-"""The design gradient as cacheable programs (`ffr_jax._cacheable`, what `ffr-jax gradient` runs).
+"""The design gradient as cacheable programs (`ffr_jax._app._cacheable`, what `ffr-jax gradient` runs).
 
 Checked on the small case family: the split programs give the adjoint gradient of `value_and_grad`;
 an exported program saved by one compilation is loaded by the next without tracing and gives the
@@ -14,7 +14,7 @@ import pytest
 from helpers import ATOL, RTOL, adjoint_value_and_grad, random_design, small_case
 
 import ffr_jax as fj
-from ffr_jax._cacheable import _program_key, compile_value_and_grad
+from ffr_jax._app._cacheable import _program_key, compile_value_and_grad
 
 
 @pytest.fixture(scope="module")

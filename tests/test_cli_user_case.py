@@ -1,5 +1,5 @@
 """The commands on a user's case: `ffr-jax info|gradient|optimize|animate|export my_case.py:make_case`, a
-Python file in tmp_path whose function returns a case (run in-process through `ffr_jax._cli.main`).
+Python file in tmp_path whose function returns a case (run in-process through `ffr_jax._app._cli.main`).
 
 The case and the solver settings are those of tests/test_io.py's tiny run (8 x 2 rod, 2 modes, t1 = 0.2 s,
 adjoint at rtol 1e-6, atol 1e-12, the default filter), so that the programs compile once for both (in one
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import ffr_jax as fj
-from ffr_jax._cli import main
+from ffr_jax._app._cli import main
 
 USER_CASE = '''
 import ffr_jax as fj

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import ffr_jax as fj
-from ffr_jax._io._cli import slider_crank_case
+from ffr_jax._app._cli_io import slider_crank_case
 
 from helpers import random_design
 

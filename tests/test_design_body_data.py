@@ -18,7 +18,7 @@ from helpers import assert_close_relative, random_design, random_orthogonal, rot
 
 import ffr_jax
 import ffr_jax._design as fd
-from ffr_jax._body_dynamics import (
+from ffr_jax._dynamics._body_dynamics import (
     body_inertia_and_elastic_forces,
     body_kinetic_energy,
     body_mass_matrix,

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import ffr_jax as fj
-from ffr_jax._simulate import solve_minimal
-from ffr_jax._small_linalg import lu_factor
+from ffr_jax._dynamics._simulate import solve_minimal
+from ffr_jax._dynamics._small_linalg import lu_factor
 from ffr_jax._solver._rosenbrock import rosenbrock_matrix, rosenbrock_stages
 from ffr_jax._sensitivity._discrete_adjoint import _vector_field, step_transpose
 

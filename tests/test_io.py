@@ -14,7 +14,7 @@ import scipy.linalg
 import pytest
 
 import ffr_jax as fj
-from ffr_jax._cli import main
+from ffr_jax._app._cli import main
 
 # The case and solver settings of test_optimize.py's tiny CLI run: the compiled objective (the
 # expensive program) is the same, so one of the two finds it in the persistent compilation cache.
@@ -40,7 +40,7 @@ def run_dir(tmp_path_factory):
 @pytest.fixture(scope="module")
 def case():
     # The commands' own case object, so that the programs they compiled (modes, motion) are reused.
-    from ffr_jax._io._cli import slider_crank_case
+    from ffr_jax._app._cli_io import slider_crank_case
 
     return slider_crank_case(8, 2, 2, 0.2)
 

@@ -27,7 +27,7 @@ import pytest
 from helpers import assert_close_relative
 
 import ffr_jax as fj
-from ffr_jax._cli import main
+from ffr_jax._app._cli import main
 
 pytest.importorskip("gmsh")
 

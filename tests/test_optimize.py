@@ -22,7 +22,7 @@ import pytest
 import scipy.optimize
 
 import ffr_jax as fj
-from ffr_jax._cli import main
+from ffr_jax._app._cli import main
 
 from helpers import small_case
 

@@ -8,8 +8,8 @@ import pytest
 
 import ffr_jax as fj
 from ffr_jax._errors import SimulationError, error_if
-from ffr_jax._model import _NOT_CONVERGED
-from ffr_jax._optimize._cli import _DEFAULTS as CLI_DEFAULTS
+from ffr_jax._dynamics._model import _NOT_CONVERGED
+from ffr_jax._app._cli_optimize import _DEFAULTS as CLI_DEFAULTS
 from helpers import small_case
 
 VOLUME = 0.5

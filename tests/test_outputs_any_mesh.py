@@ -196,7 +196,7 @@ def test_animation_checks_its_inputs_before_simulating(part, tmp_path, monkeypat
     def no_simulation(*args, **kwargs):
         raise AssertionError("the simulation ran before the inputs were checked")
 
-    monkeypatch.setattr("ffr_jax._io._animation.body_motion", no_simulation)
+    monkeypatch.setattr("ffr_jax._app._animation.body_motion", no_simulation)
     x = np.full(case.n_design, 0.5 * case.material.x_min) if bad.pop("x", None) else _banded(case)
     with pytest.raises(ValueError, match=match):
         fj.animate(case, x, tmp_path / "bad.gif", **bad)

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 import ffr_jax as fj
-from ffr_jax._optimize._run_lock import RunLock
+from ffr_jax._app._run_lock import RunLock
 
 ROOT = Path(__file__).resolve().parent.parent
 X0 = jnp.full(4, 0.5)
@@ -137,7 +137,7 @@ SMALL = "optimize slider-crank --nx 4 --ny 2 --modes 2 --t1 0.05 --iters 3 --no-
 
 
 def _cli(argv: str, **paths):
-    from ffr_jax._cli import main
+    from ffr_jax._app._cli import main
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -149,7 +149,7 @@ def _cli(argv: str, **paths):
 def test_cli_reports_a_stopped_run_in_one_line(tmp_path, monkeypatch, fault):
     """The run stops after its first checkpoint (a fault injected into the driver): one line on stderr with the
     cause, the checkpoint kept and the command that continues the run; no traceback."""
-    import ffr_jax._optimize._cli as cli
+    import ffr_jax._app._cli_optimize as cli
 
     def optimize(fun, x0, optimizer, constraints, *, directory, config, **kwargs):
         Path(directory).mkdir(parents=True, exist_ok=True)

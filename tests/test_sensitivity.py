@@ -29,7 +29,7 @@ from helpers import (ATOL, FAMILY, RTOL, TRACES, adjoint_value_and_grad, assert_
                      random_design, small_case, tight_objective, uniform_design)
 
 import ffr_jax as fj
-from ffr_jax._cli import main
+from ffr_jax._app._cli import main
 
 MODES = FAMILY["n_modes"]
 BACKSOLVE = fj.Backsolve(rtol=1e-10, atol=1e-16)

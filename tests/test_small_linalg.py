@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ffr_jax._small_linalg import UNROLL_MAX, factored_solve, lu_factor, matmul, spd_solve
+from ffr_jax._dynamics._small_linalg import UNROLL_MAX, factored_solve, lu_factor, matmul, spd_solve
 
 
 def _spd(n, seed):

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import ffr_jax as fj
-from ffr_jax._body_dynamics import body_inertia_and_elastic_forces, body_mass_matrix, marker_position
+from ffr_jax._dynamics._body_dynamics import body_inertia_and_elastic_forces, body_mass_matrix, marker_position
 from ffr_jax._spatial import _rigid_body
 from ffr_jax._spatial._euler_parameters import angular_velocity, rotation_matrix
 

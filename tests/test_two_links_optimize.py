@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from ffr_jax._cli import main
+from ffr_jax._app._cli import main
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -41,7 +41,7 @@ def test_cli_optimizes_both_links_with_a_volume_per_body_and_resumes(tmp_path):
     the subproblem's own tolerance)."""
     env = dict(os.environ, PYTHONPATH=os.getcwd())
     out = tmp_path / "run"
-    cli = [sys.executable, "-m", "ffr_jax._cli", "optimize", "four-bar-two-links"]
+    cli = [sys.executable, "-m", "ffr_jax", "optimize", "four-bar-two-links"]
     base = ["--nx", "8", "--ny", "2", "--modes", "2", "--t1", "0.3", "--atol", "1e-14", "--volume-per-body", "0.4",
             "0.6", "--no-progress", "--checkpoint-every", "2"]
     run = subprocess.run(cli + base + ["--iters", "2", "--out", str(out)], env=env, capture_output=True, text=True)

@@ -1,4 +1,5 @@
-"""The package's guard against a deadlock of jaxlib's CPU runtime (ffr_jax/_xla_flags.py).
+"""The guard against a deadlock of jaxlib's CPU runtime (ffr_jax/_dynamics/_xla_flags.py): set by the
+`ffr-jax` command before JAX starts, warned about by `sharded_map(batch_size=...)`, never by `import ffr_jax`.
 
 Batched LAPACK kernels under `jax.vmap`, two independent ones per program (a difference quotient
 `f(x + h) - f(x - h)` of a dense modal analysis), hung 3 of 3 runs on 2 cores without the guard; run
@@ -16,6 +17,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 PROGRAM = """
+from ffr_jax._dynamics._xla_flags import avoid_batched_lapack_deadlock
+avoid_batched_lapack_deadlock()  # what the ffr-jax command does first
 import ffr_jax, jax, jax.numpy as jnp, os
 assert "--xla_cpu_enable_concurrency_optimized_scheduler=false" in os.environ["XLA_FLAGS"], os.environ["XLA_FLAGS"]
 def f(s):
@@ -47,8 +50,15 @@ def test_batched_lapack_kernels_under_vmap_do_not_deadlock():
     assert result.returncode == 0 and "done" in result.stdout, result.stderr[-2000:]
 
 
+def test_importing_the_package_leaves_the_environment_alone():
+    result = _run("import os; before = dict(os.environ); import ffr_jax; print(before == dict(os.environ))", None,
+                  timeout=120)
+    assert result.returncode == 0 and result.stdout.split() == ["True"], result.stderr[-2000:]
+
+
 def test_a_setting_of_the_user_is_kept():
-    program = "import ffr_jax, os; print(os.environ['XLA_FLAGS'])"
+    program = ("from ffr_jax._dynamics._xla_flags import avoid_batched_lapack_deadlock as a; a(); "
+               "import os; print(os.environ['XLA_FLAGS'])")
     result = _run(program, "--xla_cpu_enable_concurrency_optimized_scheduler=true --xla_dump_to=/dev/null", timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout.split() == ["--xla_cpu_enable_concurrency_optimized_scheduler=true", "--xla_dump_to=/dev/null"]
@@ -56,9 +66,22 @@ def test_a_setting_of_the_user_is_kept():
     assert result.stdout.split() == ["--xla_dump_to=/dev/null", "--xla_cpu_enable_concurrency_optimized_scheduler=false"]
 
 
-def test_importing_after_jax_started_warns_that_the_guard_is_not_in_effect():
-    result = _run("import jax.numpy as jnp; jnp.ones(2).sum()\nimport ffr_jax", None, timeout=120)
+GUARD = "from ffr_jax._dynamics._xla_flags import avoid_batched_lapack_deadlock as a; a()"
+
+
+def test_the_guard_after_jax_started_warns_that_it_is_not_in_effect():
+    result = _run("import jax.numpy as jnp; jnp.ones(2).sum()\n" + GUARD, None, timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
-    assert "JAX's backend started before ffr_jax was imported" in result.stderr
-    result = _run("import ffr_jax, jax.numpy as jnp; jnp.ones(2).sum()", None, timeout=120)
+    assert "JAX's backend started before" in result.stderr
+    result = _run(GUARD + "\nimport jax.numpy as jnp; jnp.ones(2).sum()", None, timeout=120)
     assert "backend started" not in result.stderr
+
+
+def test_batched_sharded_map_warns_without_the_guard():
+    program = ("import warnings, jax.numpy as jnp, ffr_jax as fj\n"
+               "with warnings.catch_warnings(record=True) as w:\n"
+               "    warnings.simplefilter('always')\n"
+               "    fj.sharded_map(lambda x: x * 2.0, batch_size=2)\n"
+               "print(any('concurrency_optimized_scheduler' in str(m.message) for m in w))")
+    assert _run(program, None, timeout=120).stdout.split() == ["True"]
+    assert _run(program, "--xla_cpu_enable_concurrency_optimized_scheduler=false", timeout=120).stdout.split() == ["False"]

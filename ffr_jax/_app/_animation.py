@@ -10,11 +10,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import Case
+from .._dynamics._case import Case
 from .._design.body_data import marker_node_sets
 from .._scene._point_on_line import PointOnLine
 from .._scene._prescribed_point import CrankPin
-from .._simulate import solve_minimal
+from .._dynamics._simulate import solve_minimal
 
 
 class Animation(NamedTuple):

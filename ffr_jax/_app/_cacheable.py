@@ -43,9 +43,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._case import Case
-from ._sensitivity._base import AbstractSensitivity
-from ._sensitivity._finite_differences import FiniteDifferences
+from .._dynamics._case import Case
+from .._sensitivity._base import AbstractSensitivity
+from .._sensitivity._finite_differences import FiniteDifferences
 
 try:  # where equinox reads its error mode when a check is traced (equinox 0.11 - 0.13)
     import equinox._errors as _eqx_errors
@@ -142,7 +142,7 @@ def compile_value_and_grad(case: Case, x, method: AbstractSensitivity, *, rtol: 
     holds `compile_s` (tracing, compiling or loading) and `exported_loaded` (whether the scene
     gradient came from `export_dir` without tracing).
     """
-    from ._api import value_and_grad, value_and_grad_scene
+    from .._api import value_and_grad, value_and_grad_scene
 
     options = dict(rtol=rtol, atol=atol, max_steps=max_steps)
     start = time.perf_counter()

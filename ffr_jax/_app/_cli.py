@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from . import _cli_checks
+from .._dynamics._xla_flags import avoid_batched_lapack_deadlock
 from ._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_case, make_case, scene_settings
-from ._io._cli import add_io_parsers
-from ._optimize._cli import add_optimize_parser
+from ._cli_io import add_io_parsers
+from ._cli_optimize import add_optimize_parser
 
 
 def _add_case_arguments(p: argparse.ArgumentParser) -> None:
@@ -55,9 +56,13 @@ def _info(args) -> int:
 def _gradient(args) -> int:
     import jax
 
-    import ffr_jax as fj
-    from ffr_jax._api import sensitivity_method
-    from ffr_jax._cacheable import cache_events, compile_value_and_grad
+    from ._gradient_plot import plot_field, plot_gradient, row_signs
+    from .._errors import clean_errors
+    from .._sensitivity._adjoint import Adjoint
+    from .._sensitivity._backsolve import Backsolve
+    from .._sensitivity._finite_differences import FiniteDifferences
+    from .._api import sensitivity_method
+    from ._cacheable import cache_events, compile_value_and_grad
 
     if args.atol is None:
         args.atol = scene_settings(args.case, {})["atol"]
@@ -66,12 +71,12 @@ def _gradient(args) -> int:
     x = case.initial_design(args.value)
     method = args.method
     if args.method == "fd" and args.fd_step is not None:
-        method = fj.FiniteDifferences(step=args.fd_step)
+        method = FiniteDifferences(step=args.fd_step)
     elif args.method in ("adjoint", "backsolve"):
-        defaults = fj.Adjoint() if args.method == "adjoint" else fj.Backsolve()
+        defaults = Adjoint() if args.method == "adjoint" else Backsolve()
         rtol = defaults.rtol if args.backward_rtol is None else args.backward_rtol
         atol = defaults.atol if args.backward_atol is None else args.backward_atol
-        method = fj.Adjoint(rtol=rtol, atol=atol) if args.method == "adjoint" else fj.Backsolve(rtol=rtol, atol=atol)
+        method = Adjoint(rtol=rtol, atol=atol) if args.method == "adjoint" else Backsolve(rtol=rtol, atol=atol)
     print(f"{describe(args.case, case)}, x = {args.value}, {case.n_modes} modes, t1 = {case.t1} s; "
           f"method {args.method}, rtol {args.rtol:g}, atol {args.atol:g}")
     # Compiled as programs the persistent cache can keep (a second run loads them instead of compiling).
@@ -80,7 +85,7 @@ def _gradient(args) -> int:
     compiled, info = compile_value_and_grad(case, x, sensitivity_method(method), rtol=args.rtol, atol=args.atol,
                                             export_dir=None if directory is None else directory / "programs")
     compile_s = info["compile_s"]
-    compiled = fj.clean_errors(compiled)  # run-time errors with the package's message
+    compiled = clean_errors(compiled)  # run-time errors with the package's message
     # One solve gives psi and the gradient; --repeat N times N - 1 more calls of the compiled program.
     runs = []
     for _ in range(args.repeat):
@@ -110,7 +115,7 @@ def _gradient(args) -> int:
           f"({where}), 2-norm {np.linalg.norm(grad):.4e}")
     if rod:
         print("sign pattern by element row (bottom to top):")
-        for row in fj.row_signs(case, grad):
+        for row in row_signs(case, grad):
             print(f"  row {row['row']}  y in [{row['y_min']:+.4f}, {row['y_max']:+.4f}] m: "
                   f"{row['n_negative']:4d} negative, {row['n_positive']:4d} positive, mean {row['mean']:+.3e}  "
                   f"[{row['sign']}]")
@@ -144,11 +149,11 @@ def _gradient(args) -> int:
         print(f"wrote {args.json}")
     if args.plot is not None:
         if rod:
-            figure = fj.plot_gradient(case, grad, title=f"dpsi/dx ({args.method}), {case.mesh.nx} x {case.mesh.ny} "
+            figure = plot_gradient(case, grad, title=f"dpsi/dx ({args.method}), {case.mesh.nx} x {case.mesh.ny} "
                                                         f"rod, x = {args.value}, psi = {psi:.6e}")
         else:
             body = "link coupler" if args.case == "link-four-bar" else f"{args.case}, body {case.design_map.names[0]}"
-            figure = fj.plot_field(case, grad, signed=True, title=f"dpsi/dx ({args.method}), {body}, "
+            figure = plot_field(case, grad, signed=True, title=f"dpsi/dx ({args.method}), {body}, "
                                                                   f"x = {args.value}, psi = {psi:.6e}").figure
         figure.savefig(args.plot, dpi=150)
         print(f"wrote {args.plot}")
@@ -156,7 +161,7 @@ def _gradient(args) -> int:
 
 
 def _add_gradient_parser(sub) -> None:
-    from ._api import METHODS
+    from .._api import METHODS
 
     p = sub.add_parser(
         "gradient",
@@ -220,6 +225,7 @@ def _use_cache(enabled: bool) -> None:
 
 
 def main(argv=None) -> int:
+    avoid_batched_lapack_deadlock()  # before JAX starts its backend (the command batches modal analyses)
     parser = argparse.ArgumentParser(prog="ffr-jax", description=__doc__)
     parser.add_argument("--no-cache", action="store_true",
                         help=f"do not use the persistent compilation cache (also {NO_CACHE_ENV}=1; its directory: "
@@ -236,7 +242,7 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (ValueError, RuntimeError) as err:
-        from ._errors import package_error
+        from .._errors import package_error
 
         print(f"ffr-jax: error: {package_error(err) or err}", file=sys.stderr)
         return 2

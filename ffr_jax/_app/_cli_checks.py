@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 from types import SimpleNamespace
 
-from . import _checks
+from .. import _checks
 
 # The CLI builds the paper's slider-crank with the default SIMP law (REFERENCE_CASE §1).
 X_MIN = 0.01
@@ -82,7 +82,7 @@ def optimize_options(settings: dict, args, directory: Path, resume: bool) -> Non
     _checks.integer(args.checkpoint_every, "--checkpoint-every", 1)
     _checks.output_directory(directory, "--resume" if resume else "--out")
     if resume:
-        from ._optimize._checkpoint import load_checkpoint
+        from ._checkpoint import load_checkpoint
 
         load_checkpoint(directory / "checkpoint.npz", design_bounds=(X_MIN, 1.0))
     if not resume and (directory / "checkpoint.npz").exists():

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._cli_scenes import USER_CASE_HELP, case_name, is_user_case, load_user_case
+from ._cli_scenes import USER_CASE_HELP, case_name, is_user_case, load_user_case
 
 _CASE_DEFAULTS = {"nx": 100, "ny": 6, "modes": 6, "t1": 3.0}
 
@@ -20,9 +20,9 @@ def slider_crank_case(nx: int, ny: int, modes: int, t1: float):
     notebooks) lets the compiled programs that take it (the animation's motion, the modal analysis)
     be reused instead of traced again.
     """
-    import ffr_jax as fj
+    from .. import cases
 
-    return fj.cases.slider_crank(nx=nx, ny=ny, n_modes=modes, t1=t1)
+    return cases.slider_crank(nx=nx, ny=ny, n_modes=modes, t1=t1)
 
 
 def _add_design_arguments(p: argparse.ArgumentParser) -> None:

@@ -9,11 +9,11 @@ import numpy as np
 
 from .._api import METHODS
 from .._checks import in_interval, number
-from .._cli_checks import optimize_options
-from .._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_case, make_case, scene_settings
+from ._cli_checks import optimize_options
+from ._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_case, make_case, scene_settings
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
-from ._mma import DEFAULT_MOVE
+from .._optimize._mma import DEFAULT_MOVE
 
 # Settings that define a run: stored in its checkpoints, taken from there on --resume.
 _DEFAULTS = {
@@ -21,7 +21,7 @@ _DEFAULTS = {
     "optimizer": None,  # the scene's default (ffr_jax._cli_scenes): adam for the rod, oc for the link
     "lr": 0.02,
     "move": 0.05,
-    "mma_move": DEFAULT_MOVE,  # fj.MMA's default
+    "mma_move": DEFAULT_MOVE,  # MMA's default
     "frequency_min": 0.0,
     "mass_max": 0.0,
     "stop_change": 0.0,
@@ -175,8 +175,10 @@ def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | Non
     after a finished one) share the objective function, and so its compiled program (see
     [`make_step`][]), whatever optimizer or constraints they use.
     """
-    import ffr_jax as fj
-    from .._io._cli import slider_crank_case
+    from .._design.filter import DensityFilter
+    from .._optimize._objective import make_objective
+    from .._optimize._projection import HeavisideProjection
+    from ._cli_io import slider_crank_case
 
     settings = dict(geometry)
     if scene == "slider-crank":  # the case object of the other commands (animate, export): shared programs
@@ -184,9 +186,9 @@ def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | Non
                                  float(settings["t1"]))
     else:
         case = make_case(scene, settings)
-    filt = fj.DensityFilter(case.design, filter_radius)
-    projection = None if eta is None else fj.HeavisideProjection(eta, x_min=case.material.x_min)
-    fun = fj.make_objective(case, method, filter=filt, projection=projection, rtol=rtol, atol=atol)
+    filt = DensityFilter(case.design, filter_radius)
+    projection = None if eta is None else HeavisideProjection(eta, x_min=case.material.x_min)
+    fun = make_objective(case, method, filter=filt, projection=projection, rtol=rtol, atol=atol)
     return case, filt, projection, fun
 
 
@@ -227,7 +229,14 @@ def _stopped(args: argparse.Namespace, err: BaseException) -> str:
 def _run_command(args: argparse.Namespace) -> int:
     import optax
 
-    import ffr_jax as fj
+    from ._plot_optimize import plot_design, plot_history
+    from .._optimize._frequency import FrequencyConstraint
+    from .._optimize._mass import MassConstraint
+    from .._optimize._mma import MMA
+    from .._optimize._objective import physical_densities
+    from .._optimize._oc import optimality_criteria
+    from .._optimize._projection import beta_continuation
+    from .._optimize._volume import VolumeConstraint
 
     directory, s, stored = _settings(args)
     if s["case"] == "four-bar-two-links":
@@ -248,25 +257,25 @@ def _run_command(args: argparse.Namespace) -> int:
                                            float(s["rtol"]), float(s["atol"]))
     beta = None
     if s["beta"] > 0.0:
-        beta = fj.beta_continuation(s["beta"], max(s["beta_max"], s["beta"]), every=s["beta_every"])
-    constraint = fj.VolumeConstraint(s["volume"], x_min=case.material.x_min, filter=filt, projection=projection)
+        beta = beta_continuation(s["beta"], max(s["beta_max"], s["beta"]), every=s["beta_every"])
+    constraint = VolumeConstraint(s["volume"], x_min=case.material.x_min, filter=filt, projection=projection)
     constraints = [constraint]
     if s["optimizer"] != "mma" and (s["frequency_min"] > 0.0 or s["mass_max"] > 0.0):
         raise ValueError(f"--frequency-min and --mass-max need --optimizer mma; {s['optimizer']} holds only the "
                          "volume (by projection).")
     if s["frequency_min"] > 0.0:
-        constraints.append(fj.FrequencyConstraint(case, s["frequency_min"], filter=filt, projection=projection))
+        constraints.append(FrequencyConstraint(case, s["frequency_min"], filter=filt, projection=projection))
     if s["mass_max"] > 0.0:
-        constraints.append(fj.MassConstraint(case.design, s["mass_max"], filter=filt, projection=projection))
+        constraints.append(MassConstraint(case.design, s["mass_max"], filter=filt, projection=projection))
     if s["optimizer"] == "adam":
         optimizer = optax.adam(s["lr"])
     elif s["optimizer"] == "oc":
-        optimizer = fj.optimality_criteria(constraint, move=s["move"])
+        optimizer = optimality_criteria(constraint, move=s["move"])
     else:
-        optimizer = fj.MMA(case.material.x_min, 1.0, move=s["mma_move"])
+        optimizer = MMA(case.material.x_min, 1.0, move=s["mma_move"])
     projected = "" if beta is None else f", Heaviside projection beta {s['beta']} -> {s['beta_max']} (x2 every {s['beta_every']})"
-    bounds = "".join(f", {c.name} {'>=' if isinstance(c, fj.FrequencyConstraint) else '<='} "
-                     f"{c.minimum if isinstance(c, fj.FrequencyConstraint) else c.bound:g}" for c in constraints[1:])
+    bounds = "".join(f", {c.name} {'>=' if isinstance(c, FrequencyConstraint) else '<='} "
+                     f"{c.minimum if isinstance(c, FrequencyConstraint) else c.bound:g}" for c in constraints[1:])
     print(f"optimize {describe(s['case'], case)}, "
           f"V = {s['volume']}{bounds}, {s['optimizer']}, filter radius {s['filter_radius']}{projected}, "
           f"{args.iters} steps -> {directory}")
@@ -279,15 +288,15 @@ def _run_command(args: argparse.Namespace) -> int:
     h = result.history
     # The last iterate was projected onto the volume with the last step's beta.
     beta_last = None if beta is None else beta(max(h.steps - 1, 0))
-    x_phys = np.asarray(fj.physical_densities(result.x, filt, projection, beta_last))
+    x_phys = np.asarray(physical_densities(result.x, filt, projection, beta_last))
     np.savez(directory / "design.npz", x=np.asarray(result.x), x_phys=x_phys, psi=h.value, volume=h.volume,
              max_change=h.change, beta=np.array(np.nan if beta_last is None else beta_last),
              config=np.array(json.dumps(s, sort_keys=True)), constraint_names=np.array(json.dumps(list(h.names))),
              constraint_history=h.constraint_values, constraints=np.asarray(result.constraints))
     bound = f"V = {s['volume']}" if s["optimizer"] != "mma" else f"V = {x_phys.mean():.3f} (<= {s['volume']})"
-    ax = fj.plot_design(case, x_phys, title=f"{s['case']}, {s['optimizer']}, {bound}, {h.steps} steps")
+    ax = plot_design(case, x_phys, title=f"{s['case']}, {s['optimizer']}, {bound}, {h.steps} steps")
     ax.figure.savefig(directory / "design.png", dpi=150)
-    ax = fj.plot_history(h)
+    ax = plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)
     if h.steps:
         print(f"psi {h.value[0]:.6e} -> {h.value[-1]:.6e} over {h.steps} steps, volume {h.volume[-1]:.6f}")
@@ -301,7 +310,13 @@ def _run_command(args: argparse.Namespace) -> int:
 
 def _run_two_links(args: argparse.Namespace, directory: Path, s: dict, config: dict) -> int:
     """`optimize four-bar-two-links`: coupler and rocker designed together (a dict design through MMA)."""
-    import ffr_jax as fj
+    from .. import cases
+    from ._plot_optimize import plot_designs, plot_history
+    from .._design.filter import DensityFilter
+    from .._optimize._mma import MMA
+    from .._optimize._objective import make_objective, physical_densities
+    from .._optimize._pytree import OnBody
+    from .._optimize._volume import VolumeConstraint
 
     unsupported = [f"--{key.replace('_', '-')}" for key in ("frequency_min", "mass_max", "beta")
                    if s[key] != _DEFAULTS[key]]
@@ -310,41 +325,41 @@ def _run_two_links(args: argparse.Namespace, directory: Path, s: dict, config: d
     if unsupported:
         raise ValueError(f"four-bar-two-links does not take {', '.join(unsupported)}: it runs MMA with volume bounds "
                          "(--volume shared, or --volume-per-body VC VR).")
-    case = fj.cases.four_bar_two_links(int(s["nx"]), int(s["ny"]), int(s["modes"]), float(s["t1"]))
+    case = cases.four_bar_two_links(int(s["nx"]), int(s["ny"]), int(s["modes"]), float(s["t1"]))
     names = case.design_map.names
-    filters = {name: fj.DensityFilter(body, float(s["filter_radius"])) for name, body in case.design_map.bodies.items()}
+    filters = {name: DensityFilter(body, float(s["filter_radius"])) for name, body in case.design_map.bodies.items()}
     x_min = min(body.material.x_min for body in case.design_map.bodies.values())
     if s["volume_per_body"] is not None:
         if len(s["volume_per_body"]) != len(names):
             raise ValueError(f"--volume-per-body takes one fraction per designed rod {list(names)}, got "
                              f"{s['volume_per_body']}.")
         volumes = dict(zip(names, s["volume_per_body"]))
-        constraints = [fj.OnBody(fj.VolumeConstraint(v, x_min=x_min, filter=filters[name]), name)
+        constraints = [OnBody(VolumeConstraint(v, x_min=x_min, filter=filters[name]), name)
                        for name, v in volumes.items()]
         bound = ", ".join(f"V_{name} <= {v}" for name, v in volumes.items())
     else:
         volumes = {name: s["volume"] for name in names}
-        constraints = [fj.VolumeConstraint(s["volume"], x_min=x_min, filter=filters)]
+        constraints = [VolumeConstraint(s["volume"], x_min=x_min, filter=filters)]
         bound = f"V (both rods) <= {s['volume']}"
-    fun = fj.make_objective(case, s["method"], filter=filters, rtol=float(s["rtol"]), atol=float(s["atol"]))
+    fun = make_objective(case, s["method"], filter=filters, rtol=float(s["rtol"]), atol=float(s["atol"]))
     sizes = ", ".join(f"{n} {b.mesh.nx} x {b.mesh.ny}" for n, b in case.design_map.bodies.items())
     print(f"optimize four-bar-two-links: {sizes} elements, {case.design_map.design_sizes} densities, {bound}, mma, "
           f"filter radius {s['filter_radius']}, {args.iters} steps -> {directory}")
-    result = optimize(fun, case.initial_design(volumes), fj.MMA(x_min, 1.0, move=s["mma_move"]), constraints,
+    result = optimize(fun, case.initial_design(volumes), MMA(x_min, 1.0, move=s["mma_move"]), constraints,
                       iterations=args.iters, directory=directory, resume=args.resume is not None,
                       checkpoint_every=args.checkpoint_every, config=config, progress=not args.no_progress,
                       stop_change=s["stop_change"] if s["stop_change"] > 0.0 else None,
                       force_resume=args.force_resume)
     h = result.history
-    x_phys = {name: np.asarray(v) for name, v in fj.physical_densities(result.x, filters, None).items()}
+    x_phys = {name: np.asarray(v) for name, v in physical_densities(result.x, filters, None).items()}
     np.savez(directory / "design.npz", psi=h.value, config=np.array(json.dumps(s, sort_keys=True)),
              constraint_names=np.array(json.dumps(list(h.names))), constraint_history=h.constraint_values,
              **{f"x_{name}": np.asarray(result.x[name]) for name in names},
              **{f"x_phys_{name}": x_phys[name] for name in names})
     volume_text = ", ".join(f"{name} {x_phys[name].mean():.3f}" for name in names)
-    fig = fj.plot_designs(case, x_phys, title=f"four-bar-two-links, mma, {bound}, {h.steps} steps")
+    fig = plot_designs(case, x_phys, title=f"four-bar-two-links, mma, {bound}, {h.steps} steps")
     fig.savefig(directory / "design.png", dpi=150)
-    ax = fj.plot_history(h)
+    ax = plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)
     if h.steps:
         print(f"psi {h.value[0]:.6e} -> {h.value[-1]:.6e} over {h.steps} steps, mean density {volume_text}")

@@ -61,7 +61,8 @@ def load_user_case(name: str):
 
 @functools.cache
 def _load_user_case(path: str, mtime_ns: int, function: str, name: str):
-    import ffr_jax as fj
+    from .. import cases
+    from .._dynamics._case import Case
 
     spec = importlib.util.spec_from_file_location(f"ffr_jax_user_case_{abs(hash((path, mtime_ns)))}", path)
     module = importlib.util.module_from_spec(spec)
@@ -71,7 +72,7 @@ def _load_user_case(path: str, mtime_ns: int, function: str, name: str):
         raise ValueError(f"{name}: {Path(path).name} defines no function {function!r} (define `def {function}(): "
                          "return case`).")
     case = make()
-    if not isinstance(case, fj.Case):
+    if not isinstance(case, Case):
         raise ValueError(f"{name}: {function}() returned {type(case).__name__}, not an ffr_jax.Case (e.g. "
                          "fj.cases.slider_crank(rod=...)).")
     if len(case.design_map.names) != 1:
@@ -96,13 +97,13 @@ def scene_settings(scene: str, given: dict) -> dict:
 
 def make_case(scene: str, settings: dict):
     """The case of a CLI scene with settings from [`scene_settings`][]."""
-    import ffr_jax as fj
+    from .. import cases
 
     if is_user_case(scene):
         return load_user_case(scene)
     if scene == "slider-crank":
-        return fj.cases.slider_crank(nx=settings["nx"], ny=settings["ny"], n_modes=settings["modes"], t1=settings["t1"])
-    return fj.cases.link_four_bar(settings["t1"], mesh_size=settings["mesh_size"], n_modes=settings["modes"])
+        return cases.slider_crank(nx=settings["nx"], ny=settings["ny"], n_modes=settings["modes"], t1=settings["t1"])
+    return cases.link_four_bar(settings["t1"], mesh_size=settings["mesh_size"], n_modes=settings["modes"])
 
 
 def describe(scene: str, case) -> str:

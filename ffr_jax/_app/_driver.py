@@ -17,15 +17,15 @@ import optax
 
 from .._errors import FFRJaxError, SimulationError
 from ._checkpoint import Checkpoint, CheckpointError, load_checkpoint, restore_opt_state, save_checkpoint
-from ._fingerprint import tree_fingerprint
+from .._optimize._fingerprint import tree_fingerprint
 from ._history import History
 from ._progress import Progress
-from ._projection import _check_beta
-from ._constraint import AbstractDesignConstraint
-from ._pytree import Raveled, is_flat, raveled_objective
+from .._optimize._projection import _check_beta
+from .._optimize._constraint import AbstractDesignConstraint
+from .._optimize._pytree import Raveled, is_flat, raveled_objective
 from ._run_lock import RunLock
-from ._step import as_optimizer, evaluate_constraints, make_step
-from ._mma import MMA
+from .._optimize._step import as_optimizer, evaluate_constraints, make_step
+from .._optimize._mma import MMA
 from ._step_error import StepBackOffWarning, redo_smaller, step_error
 
 CHECKPOINT = "checkpoint.npz"

@@ -3,9 +3,9 @@
 
 import numpy as np
 
-from ._case import Case
-from ._design.domain import SOLID
-from ._design.mesh import StructuredGrid
+from .._dynamics._case import Case
+from .._design.domain import SOLID
+from .._design.mesh import StructuredGrid
 
 
 def row_signs(case: Case, grad) -> list[dict]:

@@ -5,7 +5,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import Case
+from .._dynamics._case import Case
 from .._design.mesh import QuadMesh, StructuredGrid
 
 

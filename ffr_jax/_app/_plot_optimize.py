@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from .._case import Case
+from .._dynamics._case import Case
 from .._design.mesh import StructuredGrid
-from .._gradient_plot import plot_field
+from ._gradient_plot import plot_field
 from ._history import History
 
 

@@ -5,7 +5,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from .._case import Case
+from .._dynamics._case import Case
 
 
 def write_vtu(path, case: Case, x_phys, *, modes: bool = True) -> Path:

@@ -6,7 +6,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import Case
+from .._dynamics._case import Case
 from ._animation import body_motion, designed_body_index
 
 

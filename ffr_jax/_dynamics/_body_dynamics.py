@@ -23,9 +23,9 @@ dispatch on that type at trace time, so a planar scene traces exactly the planar
 
 import jax.numpy as jnp
 
-from ._scene._body_data import BodyData
-from ._spatial import _rigid_body as spatial
-from ._spatial._body_data import SpatialBodyData
+from .._scene._body_data import BodyData
+from .._spatial import _rigid_body as spatial
+from .._spatial._body_data import SpatialBodyData
 
 
 def rotation(theta):

@@ -9,12 +9,12 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._design.design_map import AbstractDesignMap
-from ._design.designed_body import DesignedBody
-from ._design.material import SIMP
-from ._design.mesh import QuadMesh
+from .._design.design_map import AbstractDesignMap
+from .._design.designed_body import DesignedBody
+from .._design.material import SIMP
+from .._design.mesh import QuadMesh
 from ._problem import Problem
-from ._scene._scene import Scene
+from .._scene._scene import Scene
 
 
 class Case(eqx.Module):

@@ -22,8 +22,8 @@ import jax.tree_util as jtu
 import numpy as np
 import scipy.linalg
 
-from ._errors import SimulationError, branched_error_if
-from ._scene._scene import Scene
+from .._errors import SimulationError, branched_error_if
+from .._scene._scene import Scene
 from ._small_linalg import factored_solve, lu_factor, lu_solve, matmul, spd_solve
 
 

@@ -7,10 +7,10 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._model import MinimalModel, Partition, _constraint_jacobian, choose_partition, hadamard_ratio
-from ._objective._objective import Objective, as_objective
-from ._scene._body_data import BodyData, _check_body_data
-from ._scene._references import check_references
-from ._scene._scene import Scene
+from .._objective._objective import Objective, as_objective
+from .._scene._body_data import BodyData, _check_body_data
+from .._scene._references import check_references
+from .._scene._scene import Scene
 
 
 class Problem(eqx.Module):

@@ -5,6 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
+from ._xla_flags import warn_if_unguarded
+
 
 def sharded_map(f, devices=None, axis_name: str = "batch", batch_size: int | None = None):
     """`f` over a batch of designs, the batch split evenly across `devices` (`jax.shard_map`).
@@ -22,7 +24,9 @@ def sharded_map(f, devices=None, axis_name: str = "batch", batch_size: int | Non
     On CPU, several host devices are made with
     `XLA_FLAGS=--xla_force_host_platform_device_count=N`, set before JAX is imported. Keep
     `batch_size=None` there: batched LAPACK kernels (e.g. a vmapped dense eigen-solution) fan out
-    into the thread pool the devices run on and can deadlock it (seen with jaxlib 0.10 on 2 cores).
+    into the thread pool the devices run on and can deadlock it (seen with jaxlib 0.10 on 2 cores);
+    a `batch_size` on CPU without `XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=false`
+    warns so.
 
     **Arguments:**
     - `f`: function of one batch entry (a pytree of arrays), returning a pytree of arrays.
@@ -40,6 +44,8 @@ def sharded_map(f, devices=None, axis_name: str = "batch", batch_size: int | Non
     psi, grad = fj.sharded_map(lambda x: fj.value_and_grad(case, x))(xs)
     ```
     """
+    if batch_size is not None:
+        warn_if_unguarded("sharded_map(batch_size=...)")
     devices = list(jax.devices() if devices is None else devices)
     mesh = Mesh(np.asarray(devices), (axis_name,))
     spec = PartitionSpec(axis_name)

@@ -9,8 +9,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._model import MinimalModel
-from ._objective._base import AbstractIntegrand
-from ._scene._scene import Scene
+from .._objective._base import AbstractIntegrand
+from .._scene._scene import Scene
 
 
 class Trajectory(eqx.Module):

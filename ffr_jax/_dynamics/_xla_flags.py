@@ -1,4 +1,4 @@
-"""XLA settings the package needs before JAX starts its CPU backend.
+"""An XLA setting that batched dense modal analyses need on CPU, set before JAX starts its backend.
 
 A deadlock of jaxlib's CPU runtime (jax/jaxlib 0.10.2): a batched LAPACK kernel (`cholesky`,
 `eigh`, ... under `jax.vmap`) splits its batch over XLA's intra-op thread pool and blocks one pool
@@ -12,8 +12,10 @@ two independent ones per program, hung in 3 of 3 runs (and 3 of 3 other shapes a
 scheduler off, 0 of 10 runs hung.
 
 Turning the scheduler off costs no measurable run time here (a rigid problem's adjoint gradient:
-0.12 s either way). The flag is added only when the user's `XLA_FLAGS` does not set it, and only
-takes effect if `ffr_jax` is imported before JAX's backend starts (before the first computation).
+0.12 s either way). `import ffr_jax` does not touch the environment: the flag is set where batched
+modal analyses run — the `ffr-jax` command sets it before JAX starts, and [`sharded_map`][] with
+a `batch_size` warns when it is missing. A Python user who `jax.vmap`s dense modal analyses sets it
+before starting Python: `XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=false`.
 """
 
 import os
@@ -40,9 +42,21 @@ def _backend_started() -> bool:
 
 
 def avoid_batched_lapack_deadlock() -> None:
-    """Turn XLA's concurrency-optimised CPU scheduler off (see the module docstring)."""
+    """Turn XLA's concurrency-optimised CPU scheduler off (see the module docstring): called by the
+    `ffr-jax` command before JAX starts; warns when JAX's backend runs already without it."""
     if add_flag(DEADLOCK_FLAG) and _backend_started():
-        warnings.warn(f"JAX's backend started before ffr_jax was imported, so {DEADLOCK_FLAG} (XLA_FLAGS) "
-                      "does not apply in this process: batched dense modal analyses under jax.vmap may hang "
-                      "(ffr_jax/_xla_flags.py). Import ffr_jax first, or set XLA_FLAGS before starting Python.",
+        warnings.warn(f"JAX's backend started before {DEADLOCK_FLAG} was added to XLA_FLAGS, so it does not apply "
+                      "in this process: batched dense modal analyses under jax.vmap may hang "
+                      "(ffr_jax/_dynamics/_xla_flags.py). Set XLA_FLAGS before starting Python.",
                       RuntimeWarning, stacklevel=3)
+
+
+def warn_if_unguarded(where: str) -> None:
+    """A `RuntimeWarning` when `XLA_FLAGS` lacks the flag on a CPU backend (batched LAPACK kernels may hang)."""
+    import jax
+
+    if DEADLOCK_FLAG.split("=", 1)[0] in os.environ.get("XLA_FLAGS", "") or jax.default_backend() != "cpu":
+        return
+    warnings.warn(f"{where}: batched dense modal analyses under jax.vmap can deadlock XLA's CPU thread pool "
+                  f"(jaxlib 0.10); start Python with XLA_FLAGS={DEADLOCK_FLAG} (ffr_jax/_dynamics/_xla_flags.py), "
+                  "or keep batch_size=None.", RuntimeWarning, stacklevel=3)

@@ -3,7 +3,7 @@
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._model import MinimalModel, Partition
+from .._dynamics._model import MinimalModel, Partition
 from .._outputs._joint_forces import _joint_force, check_joint_name
 from .._outputs._multipliers import constraint_multipliers
 from ._base import AbstractIntegrand
@@ -40,8 +40,8 @@ class JointLoad(AbstractIntegrand):
     power: float = eqx.field(static=True)
 
     def __init__(self, target, joint: str | int, quantity: str = "torque", power: float | int = 2.0):
-        from .._case import Case
-        from .._problem import Problem
+        from .._dynamics._case import Case
+        from .._dynamics._problem import Problem
 
         if isinstance(target, Case):
             target = target.problem

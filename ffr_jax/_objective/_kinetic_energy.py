@@ -3,7 +3,7 @@
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._body_dynamics import body_kinetic_energy
+from .._dynamics._body_dynamics import body_kinetic_energy
 from ._base import AbstractIntegrand
 
 

@@ -9,9 +9,9 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .. import _api
-from .._case import Case
+from .._dynamics._case import Case
 from .._design.design_map import DesignMap
-from .._problem import Problem
+from .._dynamics._problem import Problem
 from .._scene._stiffening import GeometricStiffening
 from .._sensitivity._base import AbstractSensitivity
 from .._typing import Designs

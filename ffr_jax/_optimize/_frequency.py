@@ -4,7 +4,7 @@ import warnings
 
 import equinox as eqx
 
-from .._case import Case
+from .._dynamics._case import Case
 from .._typing import Design
 from ._constraint import AbstractDesignConstraint, pullback, status
 from .._design.filter import DensityFilter

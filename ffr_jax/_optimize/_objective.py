@@ -5,7 +5,7 @@ from collections.abc import Callable
 import jax
 
 from .. import _api
-from .._case import Case
+from .._dynamics._case import Case
 from .._sensitivity._base import AbstractSensitivity
 from .._design.filter import DensityFilter
 from .._design.stacked import StackedFilter

@@ -3,7 +3,7 @@
 import jax
 import jax.numpy as jnp
 
-from .._model import MinimalModel
+from .._dynamics._model import MinimalModel
 from .._scene._scene import Scene
 
 

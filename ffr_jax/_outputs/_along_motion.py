@@ -3,9 +3,9 @@
 import equinox as eqx
 import jax
 
-from .._case import Case
-from .._problem import Problem
-from .._simulate import Trajectory
+from .._dynamics._case import Case
+from .._dynamics._problem import Problem
+from .._dynamics._simulate import Trajectory
 from ._accelerations import redundant_accelerations
 from ._joint_forces import JointForce, joint_forces_at
 

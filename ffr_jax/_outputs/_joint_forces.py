@@ -4,8 +4,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._body_dynamics import rotate
-from .._model import MinimalModel
+from .._dynamics._body_dynamics import rotate
+from .._dynamics._model import MinimalModel
 from .._scene._angle_driver import AngleDriver
 from .._scene._ground_revolute import GroundRevolute
 from .._scene._point_on_line import PointOnLine

@@ -2,7 +2,7 @@
 
 import jax.numpy as jnp
 
-from .._model import MinimalModel
+from .._dynamics._model import MinimalModel
 from .._scene._scene import Scene
 from ._accelerations import acceleration_terms
 

@@ -54,7 +54,7 @@ def stresses(case, trajectory, x, body: int = 0):
     - `case`: a case with one designed body; `trajectory`: [`simulate`][]`(case, x, ts=...)`; `x`: its design.
     - `body`: the index of the designed body in the scene.
     """
-    from .._case import Case
+    from .._dynamics._case import Case
 
     if not isinstance(case, Case):
         raise ValueError(f"ffr_jax.stresses takes a case with its design, got {type(case).__name__}.")

@@ -2,7 +2,7 @@
 
 import jax.numpy as jnp
 
-from .._body_dynamics import rotation
+from .._dynamics._body_dynamics import rotation
 from .._spatial import _rigid_body as spatial
 from .._spatial._body_data import SpatialBodyData
 from ._base import AbstractForce

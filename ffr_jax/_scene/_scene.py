@@ -5,14 +5,7 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import jax.tree_util as jtu
 
-from .._body_dynamics import (
-    body_coordinate_names,
-    body_inertia_and_elastic_forces,
-    body_kinetic_energy,
-    body_mass_matrix,
-    body_strain_energy,
-    marker_position,
-)
+from .._dynamics._body_dynamics import body_coordinate_names, body_inertia_and_elastic_forces, body_kinetic_energy, body_mass_matrix, body_strain_energy, marker_position
 from ._base import AbstractConstraint, AbstractForce
 from ._body import Body
 from ._laws import AbstractLaw

@@ -13,8 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import optional_integer, tolerances
-from .._problem import Problem
-from .._small_linalg import lu_factor, lu_solve, matmul, spd_solve
+from .._dynamics._problem import Problem
+from .._dynamics._small_linalg import lu_factor, lu_solve, matmul, spd_solve
 from .._solver._rosenbrock import AbstractRosenbrock
 from ._base import AbstractSensitivity, forward_solve, problem_gradient
 from ._forward_grid import ForwardGridSolution, backward_on_forward_grid

@@ -7,8 +7,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import jax.tree_util as jtu
 
-from .._problem import Problem
-from .._simulate import solve_minimal
+from .._dynamics._problem import Problem
+from .._dynamics._simulate import solve_minimal
 
 
 def parameters(problem: Problem):

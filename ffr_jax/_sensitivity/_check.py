@@ -14,7 +14,7 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
-from ._case import Case
+from collections.abc import Callable
 
 
 class GradientCheck(eqx.Module):
@@ -45,44 +45,10 @@ class GradientCheck(eqx.Module):
                 "(ffr_jax.Rodas5P()), or a tighter rtol.")
 
 
-def _lower_bound(case: Case) -> float:
-    bodies = getattr(case.design_map, "bodies", None)
-    if not bodies:
-        return 0.0
-    return max(float(body.material.x_min) for body in bodies.values())
-
-
-def check_gradient(case: Case, x, grad, *, step: float = 1e-4, tolerance: float = 1e-3, random_directions: int = 0,
-                   seed: int = 0, rtol: float = 1e-10, atol: float = 1e-12, solver=None,
-                   max_steps: int = 1_000_000) -> GradientCheck:
-    """Check `grad` (of `psi` at design `x`) by its directional derivative along `grad` itself and along
-    `random_directions` random directions, against central differences of `psi`.
-
-    Along `d = g / |g|` the gradient under test predicts `g . d = |g|`; the central difference
-    measures the true derivative `g_true . d`. The two agree only when `g` is right (or lies on the
-    sphere with diameter `g_true`, a coincidence): a gradient with wrong signs or a wrong scale is
-    caught by two forward solves. Entries that `x +- h d` would push out of `[x_min, 1]` are left
-    out of `d`.
-
-    **Accuracy (the tolerance):** the central difference has truncation error
-    `h^2 |psi'''| / 6` and solver noise about `rtol |psi| / h` (the forward solves run at
-    `rtol`); with the default `h = 1e-4` and `rtol = 1e-10` both are below `1e-5` of the
-    directional derivative on the slider-crank cases (the hard-case table's finite differences
-    agree with the adjoint to 1e-10..7e-8 at such steps), so the default `tolerance = 1e-3` leaves
-    two orders for cases whose psi is small relative to its gradient, and the wrong gradients this
-    guard exists for are off by factors, not by 1e-3.
-
-    **Arguments:**
-    - `case`, `x`: the case and its design (flat array or dict by body); `grad`: the gradient
-      under test, shaped like `x`.
-    - `step`: `h`, in design units along the unit direction; `tolerance`: see above.
-    - `random_directions`: extra random unit directions (two forward solves each); `seed`.
-    - `rtol`, `atol`, `solver`, `max_steps`: the forward solves (as in [`objective`][]).
-
-    **Returns:** a [`GradientCheck`][]; `raise ValueError(check.message())` where `not check.trusted`
-    is what `value_and_grad(..., check=True)` does.
-    """
-    from ._api import objective
+def compare_with_differences(psi: Callable, x, grad, *, lower: float, step: float, tolerance: float,
+                             random_directions: int, seed: int) -> GradientCheck:
+    """The check of [`check_gradient`][ffr_jax.check_gradient] with `psi(x)` given as a function (the
+    forward solve) and `lower` the smallest density the design may take."""
 
     flat_x, unravel = jax.flatten_util.ravel_pytree(x)
     flat_g = jax.flatten_util.ravel_pytree(grad)[0]
@@ -92,7 +58,7 @@ def check_gradient(case: Case, x, grad, *, step: float = 1e-4, tolerance: float 
     if not np.all(np.isfinite(flat_g)):
         raise ValueError("check_gradient: the gradient has NaN or infinite entries (finite differences on some "
                          "entries only?); check a complete gradient.")
-    inside = (flat_x - step >= _lower_bound(case)) & (flat_x + step <= 1.0)
+    inside = (flat_x - step >= lower) & (flat_x + step <= 1.0)
     rng = np.random.default_rng(seed)
     directions = [flat_g] + [rng.standard_normal(flat_x.size) for _ in range(random_directions)]
     directional, differences = [], []
@@ -103,10 +69,8 @@ def check_gradient(case: Case, x, grad, *, step: float = 1e-4, tolerance: float 
             raise ValueError("check_gradient: the direction is zero on every entry that can move by the step "
                              "inside [x_min, 1] (a zero gradient, or a design at its bounds): nothing to check.")
         d = d / norm
-        plus = float(objective(case, unravel(jnp.asarray(flat_x + step * d)), rtol=rtol, atol=atol, solver=solver,
-                               max_steps=max_steps))
-        minus = float(objective(case, unravel(jnp.asarray(flat_x - step * d)), rtol=rtol, atol=atol, solver=solver,
-                                max_steps=max_steps))
+        plus = float(psi(unravel(jnp.asarray(flat_x + step * d))))
+        minus = float(psi(unravel(jnp.asarray(flat_x - step * d))))
         directional.append(float(flat_g @ d))
         differences.append((plus - minus) / (2.0 * step))
     directional, differences = np.asarray(directional), np.asarray(differences)

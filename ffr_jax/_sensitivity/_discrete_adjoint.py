@@ -34,9 +34,9 @@ import jax.flatten_util
 import jax.numpy as jnp
 import jax.tree_util as jtu
 
-from .._problem import Problem
-from .._simulate import minimal_vector_field
-from .._small_linalg import lu_factor, lu_solve
+from .._dynamics._problem import Problem
+from .._dynamics._simulate import minimal_vector_field
+from .._dynamics._small_linalg import lu_factor, lu_solve
 from .._solver._rodas5p import Rodas5P
 from .._solver._rosenbrock import AbstractRosenbrock, rosenbrock_matrix, rosenbrock_stages
 from ._base import AbstractSensitivity, forward_solve, problem_gradient

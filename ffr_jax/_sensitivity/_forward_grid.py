@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 
-from .._small_linalg import lu_factor
+from .._dynamics._small_linalg import lu_factor
 from .._solver._rosenbrock import AbstractRosenbrock, rosenbrock_stages
 
 

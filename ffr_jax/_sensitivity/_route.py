@@ -28,7 +28,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from .._problem import Problem
+from .._dynamics._problem import Problem
 from .._scene._body_data import BodyData
 from .._solver._rodas5p import Rodas5P
 from ._adjoint import Adjoint

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from .._small_linalg import factored_solve, lu_factor
+from .._dynamics._small_linalg import factored_solve, lu_factor
 
 
 @dataclasses.dataclass(frozen=True)

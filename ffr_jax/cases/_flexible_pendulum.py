@@ -3,11 +3,11 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import Case
+from .._dynamics._case import Case
 from .._design.design_map import DesignMap
 from .._design.material import SIMP
 from .._objective._compliance import Compliance
-from .._problem import Problem
+from .._dynamics._problem import Problem
 from .._scene._body import Body
 from .._scene._damping import ModalDamping
 from .._scene._gravity import Gravity

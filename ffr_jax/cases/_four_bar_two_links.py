@@ -3,14 +3,14 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import Case
+from .._dynamics._case import Case
 from .._design.design_map import DesignMap
 from .._design.material import SIMP
 from .._design.modal.auto import AutoModes
 from .._design.modal.base import AbstractModalSolver
-from .._model import choose_partition
+from .._dynamics._model import choose_partition
 from .._objective._compliance import Compliance
-from .._problem import Problem
+from .._dynamics._problem import Problem
 from .._scene._angle_driver import AngleDriver
 from .._scene._body import Body
 from .._scene._ground_revolute import GroundRevolute

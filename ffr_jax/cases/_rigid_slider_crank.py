@@ -4,10 +4,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._scene._body_data import rigid_body_data
-from .._model import Partition, choose_partition
+from .._dynamics._model import Partition, choose_partition
 from .._objective._base import AbstractIntegrand
 from .._objective._kinetic_energy import KineticEnergy
-from .._problem import Problem
+from .._dynamics._problem import Problem
 from .._scene._angle_driver import AngleDriver
 from .._scene._body import Body
 from .._scene._ground_revolute import GroundRevolute

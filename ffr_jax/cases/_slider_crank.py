@@ -3,7 +3,7 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .._case import Case
+from .._dynamics._case import Case
 from .._design.design_map import DesignMap
 from .._design.designed_body import DesignedBody
 from .._design.material import SIMP
@@ -11,7 +11,7 @@ from .._design.modal.auto import AutoModes
 from .._design.modal.base import AbstractModalSolver
 from .._checks import integer, number, positive
 from .._objective._compliance import Compliance
-from .._problem import Problem
+from .._dynamics._problem import Problem
 from .._scene._body import Body
 from .._scene._laws import RampLaw
 from .._scene._point_on_line import PointOnLine

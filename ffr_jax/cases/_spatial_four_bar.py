@@ -6,9 +6,9 @@ import functools
 import jax.numpy as jnp
 import numpy as np
 
-from .._model import Partition
+from .._dynamics._model import Partition
 from .._objective._kinetic_energy import KineticEnergy
-from .._problem import Problem
+from .._dynamics._problem import Problem
 from .._scene._body import Body
 from .._scene._gravity import Gravity
 from .._scene._scene import Scene
