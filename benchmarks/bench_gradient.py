@@ -275,15 +275,12 @@ def main(argv=None):
 
 
 def write_section(path: pathlib.Path, section: str) -> None:
-    """Replace this benchmark's `## ...` section of RESULTS.md (or append it), leaving the others alone."""
-    text = path.read_text() if path.exists() else "# Benchmark results\n"
-    start = text.find(SECTION)
-    if start < 0:
-        text = text.rstrip("\n") + "\n\n" + section
-    else:
-        end = text.find("\n## ", start + len(SECTION))
-        text = text[:start] + section + ("" if end < 0 else text[end:])
-    path.write_text(text.rstrip("\n") + "\n")
+    """Rewrite this benchmark's section of RESULTS.md (`_results.write_section`), leaving the others alone."""
+    import _results
+
+    if path != _results.RESULTS:
+        raise ValueError(f"write_section writes {_results.RESULTS}, not {path}")
+    _results.write_section(SECTION.removeprefix("## "), section.removeprefix(SECTION))
 
 
 if __name__ == "__main__":

@@ -138,15 +138,10 @@ def markdown(rows, command):
 
 
 def write_section(text: str):
-    path = RESULTS.parent / "RESULTS.md"
-    old = path.read_text() if path.exists() else "# Benchmark results\n"
-    start = old.find(SECTION)
-    if start < 0:
-        new = old.rstrip("\n") + "\n\n" + text
-    else:
-        end = old.find("\n## ", start + len(SECTION))
-        new = old[:start] + text + (old[end + 1:] if end >= 0 else "")
-    path.write_text(new)
+    """Rewrite this script's section of RESULTS.md (`_results.write_section`), leaving the others as they are."""
+    from _results import write_section as write
+
+    write(SECTION.removeprefix("## "), text.removeprefix(SECTION))
 
 
 def main():

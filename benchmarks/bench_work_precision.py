@@ -286,16 +286,10 @@ def markdown(data, command, case) -> str:
 
 
 def write_section(text: str):
-    """Replace (or append) this script's section of RESULTS.md, leaving the others untouched."""
-    path = RESULTS.parent / "RESULTS.md"
-    old = path.read_text() if path.exists() else "# Benchmark results\n"
-    start = old.find(SECTION)
-    if start < 0:
-        new = old.rstrip("\n") + "\n\n" + text + "\n"
-    else:
-        end = old.find("\n## ", start + len(SECTION))
-        new = old[:start] + text + ("\n" + old[end + 1:] if end >= 0 else "\n")
-    path.write_text(new)
+    """Rewrite this script's section of RESULTS.md (`_results.write_section`), leaving the others as they are."""
+    from _results import write_section as write
+
+    write(SECTION.removeprefix("## "), text.removeprefix(SECTION))
 
 
 def main():
