@@ -1,0 +1,65 @@
+"""The isoparametric trilinear hexahedron (H8)."""
+
+from typing import ClassVar
+
+import numpy as np
+
+from .solid_base import AbstractSolidElement, check_poisson, isotropic, jacobians, nodal_mass, strain_matrix
+
+# Corners of the reference cube in the VTK/meshio order: the face zeta = -1 counter-clockwise seen
+# from +zeta, then the face zeta = +1 above it.
+HEX_CORNERS = np.array([[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, 1.0, -1.0],
+                        [-1.0, -1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0]])
+GAUSS_2 = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+
+
+def trilinear(xi: float, eta: float, zeta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Trilinear shape functions `N` `(8,)` and natural derivatives `dN` `(3, 8)` at `(xi, eta, zeta)`."""
+    c = HEX_CORNERS
+    fx, fy, fz = 1 + c[:, 0] * xi, 1 + c[:, 1] * eta, 1 + c[:, 2] * zeta
+    n = fx * fy * fz / 8.0
+    dn = np.stack([c[:, 0] * fy * fz, c[:, 1] * fx * fz, c[:, 2] * fx * fy]) / 8.0
+    return n, dn
+
+
+def gauss_points_2x2x2():
+    """The 2x2x2 Gauss rule: `((xi, eta, zeta), weight)` pairs, weights 1."""
+    return [((a, b, c), 1.0) for a in GAUSS_2 for b in GAUSS_2 for c in GAUSS_2]
+
+
+def hex_jacobian_samples(xyz: np.ndarray) -> np.ndarray:
+    """`det J` of the trilinear map at the 8 corners, the 8 Gauss points and the centre, `(m, 17)`."""
+    points = list(HEX_CORNERS) + [p for p, _ in gauss_points_2x2x2()] + [(0.0, 0.0, 0.0)]
+    return np.stack([jacobians(trilinear(*p)[1], xyz)[0] for p in points], axis=1)
+
+
+class H8(AbstractSolidElement):
+    """Isoparametric 8-node trilinear hexahedron, isotropic linear elasticity, 2x2x2 Gauss quadrature.
+
+    `K_e = sum_g B^T D B det J w_g` and `M_e = sum_g N^T N det J w_g` (consistent mass, exact on
+    parallelepipeds where `N^T N det J` is at most quadratic in each natural coordinate), for
+    `E = 1`, `rho = 1`. The counterpart of [`Q4`][]: it passes the patch test but locks in
+    bending (parasitic shear), so a slender part needs several elements per thickness-to-length
+    ratio; [`H11`][] does not lock. Nodes in the VTK order (`HEX_CORNERS`).
+    """
+
+    n_nodes: ClassVar[int] = 8
+    cell_type: ClassVar[str] = "hexahedron"
+
+    def jacobian_samples(self, xyz: np.ndarray) -> np.ndarray:
+        return hex_jacobian_samples(xyz)
+
+    def reordered(self) -> np.ndarray:
+        return np.array([4, 5, 6, 7, 0, 1, 2, 3])
+
+    def matrices(self, xyz: np.ndarray, poisson: float) -> tuple[np.ndarray, np.ndarray]:
+        xyz = np.asarray(xyz, dtype=np.float64)
+        d = isotropic(check_poisson(poisson))
+        self.check(xyz)
+        k = np.zeros((xyz.shape[0], 24, 24))
+        for point, w in gauss_points_2x2x2():
+            _, dn = trilinear(*point)
+            det, inv = jacobians(dn, xyz)
+            b = strain_matrix(inv @ dn)
+            k += (w * det)[:, None, None] * (np.swapaxes(b, 1, 2) @ (d @ b))
+        return 0.5 * (k + np.swapaxes(k, 1, 2)), nodal_mass(gauss_points_2x2x2(), xyz, trilinear)
