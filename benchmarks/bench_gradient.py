@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import ffr_jax as fj
+from ffr_jax._app._gradient_plot import row_signs
 
 SECTION = "## Gradient of the reference case"
 REFERENCE = {"nx": 100, "ny": 6, "modes": 6, "t1": 3.0}
@@ -113,7 +114,7 @@ def main(argv=None):
 
     # --- forward -------------------------------------------------------------------------------
     def forward(x):
-        traj = fj.simulate_case(case, x, **tol)
+        traj = fj.simulate(case, x, **tol)
         return traj.psi, traj.num_steps
 
     (psi, steps), fwd_compile, fwd_samples = compile_and_time(forward, (x,), args.runs)
@@ -186,7 +187,7 @@ def main(argv=None):
         f"({fd_wall:.1f} s; all {case.n_design} entries ~ {fd_estimate:.0f} s)")
 
     # --- sign pattern and picture --------------------------------------------------------------
-    rows = fj.row_signs(case, adjoint)
+    rows = row_signs(case, adjoint)
     figure = fj.plot_gradient(case, adjoint, title=f"adjoint gradient dpsi/dx_e, {args.nx} x {args.ny} rod, "
                                                    f"x = {args.value}, psi = {psi:.6e}")
     png = out / "gradient_field.png"

@@ -1,5 +1,8 @@
 """ffr_jax: flexible multibody dynamics (floating frame of reference) with exact design gradients."""
 
+import importlib as _importlib
+import warnings as _warnings
+
 import jax as _jax
 
 # float64 throughout: the one place the package sets it.
@@ -7,29 +10,25 @@ _jax.config.update("jax_enable_x64", True)
 
 from . import cases as cases
 from ._errors import DesignError as DesignError, FFRJaxError as FFRJaxError, SimulationError as SimulationError, clean_errors as clean_errors
-from ._api import objective as objective, simulate as simulate, simulate_case as simulate_case, value_and_grad as value_and_grad, value_and_grad_scene as value_and_grad_scene
-from ._dynamics._case import Case as Case, FlexibleRodCase as FlexibleRodCase
+from ._api import objective as objective, simulate as simulate, value_and_grad as value_and_grad, value_and_grad_scene as value_and_grad_scene
+from ._dynamics._case import Case as Case
 from ._design import (
-    DESIGN as DESIGN, SOLID as SOLID, VOID as VOID, AbstractDesignMap as AbstractDesignMap,
+    AbstractDesignMap as AbstractDesignMap,
     AbstractElement as AbstractElement, AbstractModalSolver as AbstractModalSolver,
     AbstractReference as AbstractReference, AutoModes as AutoModes, Clamped as Clamped, DenseModes as DenseModes,
-    DensityFilter as DensityFilter, DesignDomain as DesignDomain, DesignedBody as DesignedBody, DesignMap as DesignMap,
-    ElementOperator as ElementOperator, FEModel as FEModel, FixedDofs as FixedDofs, HingedHinged as HingedHinged,
-    Interface as Interface, LanczosModes as LanczosModes, LinkMesh as LinkMesh, ModalBasis as ModalBasis,
-    ModalReduction as ModalReduction, PlateWithHole as PlateWithHole, Q4 as Q4, QM6 as QM6, QuadMesh as QuadMesh,
-    SIMP as SIMP, StackedDesigns as StackedDesigns, StackedFilter as StackedFilter, StructuredGrid as StructuredGrid, from_meshio as from_meshio, link_with_holes as link_with_holes,
-    plate_with_hole as plate_with_hole, quad_cell_data as quad_cell_data, read_mesh as read_mesh,
-    retained_eigenpairs as retained_eigenpairs, rod_domain as rod_domain, rod_joint_nodes as rod_joint_nodes,
+    DensityFilter as DensityFilter, DesignDomain as DesignDomain, DesignedBody as DesignedBody, DesignMap as DesignMap, FEModel as FEModel, FixedDofs as FixedDofs, HingedHinged as HingedHinged,
+    Interface as Interface, LanczosModes as LanczosModes, ModalBasis as ModalBasis,
+    ModalReduction as ModalReduction, Q4 as Q4, QM6 as QM6, QuadMesh as QuadMesh,
+    SIMP as SIMP, StackedDesigns as StackedDesigns, StackedFilter as StackedFilter, from_meshio as from_meshio, link_with_holes as link_with_holes,
+    plate_with_hole as plate_with_hole, read_mesh as read_mesh,
     structured_grid as structured_grid, write_mesh as write_mesh,
 )
 from ._api import check_gradient as check_gradient
-from ._sensitivity._check import GradientCheck as GradientCheck
-from ._app._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient, row_signs as row_signs
-from ._app._animation import Animation as Animation, animate as animate, body_motion as body_motion
+from ._app._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient
+from ._app._animation import animate as animate
 from ._app._outline import density_outline as density_outline, write_dxf as write_dxf, write_svg as write_svg
 from ._app._vtu import write_vtu as write_vtu
 from ._app._vtu_series import write_vtu_series as write_vtu_series
-from ._dynamics._model import MinimalModel as MinimalModel, Partition as Partition, choose_partition as choose_partition
 from ._objective._base import AbstractIntegrand as AbstractIntegrand
 from ._objective._base import Scaled as Scaled, Sum as Sum
 from ._objective._compliance import Compliance as Compliance
@@ -74,8 +73,8 @@ from ._sensitivity._finite_differences import FiniteDifferences as FiniteDiffere
 from ._sensitivity._route import Route as Route, choose_route as choose_route
 from ._dynamics._sharding import sharded_map as sharded_map
 from ._solver import Rodas4 as Rodas4, Rodas5P as Rodas5P
-from ._dynamics._simulate import Trajectory as Trajectory, consistent_minimal_state as consistent_minimal_state
-from ._app._checkpoint import Checkpoint as Checkpoint, CheckpointError as CheckpointError, load_checkpoint as load_checkpoint, restore_opt_state as restore_opt_state, save_checkpoint as save_checkpoint
+from ._dynamics._simulate import Trajectory as Trajectory
+from ._app._checkpoint import CheckpointError as CheckpointError, load_checkpoint as load_checkpoint
 from ._optimize._conditions import OperatingConditions as OperatingConditions
 from ._optimize._constraint import AbstractDesignConstraint as AbstractDesignConstraint
 from ._app._driver import ConstraintViolationWarning as ConstraintViolationWarning, OptimizeResult as OptimizeResult, optimize as optimize
@@ -84,7 +83,7 @@ from ._optimize._frequency import FrequencyConstraint as FrequencyConstraint
 from ._optimize._function_constraint import FunctionConstraint as FunctionConstraint
 from ._app._history import History as History
 from ._optimize._mass import MassConstraint as MassConstraint
-from ._optimize._mma import MMA as MMA, MMAState as MMAState
+from ._optimize._mma import MMA as MMA
 from ._optimize._oc import optimality_criteria as optimality_criteria
 from ._optimize._optimizer import AbstractOptimizer as AbstractOptimizer, ProjectedOptax as ProjectedOptax
 from ._optimize._objective import filtered_objective as filtered_objective, make_objective as make_objective, physical_densities as physical_densities
@@ -93,3 +92,48 @@ from ._optimize._projection import HeavisideProjection as HeavisideProjection, b
 from ._app._plot_optimize import plot_constraints as plot_constraints, plot_design as plot_design, plot_designs as plot_designs, plot_history as plot_history
 from ._optimize._step import StepInfo as StepInfo, make_step as make_step
 from ._optimize._volume import VolumeConstraint as VolumeConstraint
+
+
+# Public names of earlier releases, kept for one release with a DeprecationWarning (CHANGELOG.md):
+# old name -> (module, attribute, what to use instead).
+_DEPRECATED = {
+    "DESIGN": ("._design.domain", "DESIGN", "the DesignDomain's own API (an internal code)"),
+    "SOLID": ("._design.domain", "SOLID", "the DesignDomain's own API (an internal code)"),
+    "VOID": ("._design.domain", "VOID", "the DesignDomain's own API (an internal code)"),
+    "StructuredGrid": ("._design.mesh", "StructuredGrid", "ffr_jax.structured_grid(...) (its return value)"),
+    "LinkMesh": ("._design.geometry", "LinkMesh", "ffr_jax.link_with_holes(...) (its return value)"),
+    "PlateWithHole": ("._design.geometry", "PlateWithHole", "ffr_jax.plate_with_hole(...) (its return value)"),
+    "Animation": ("._app._animation", "Animation", "ffr_jax.animate(...) (its return value)"),
+    "GradientCheck": ("._sensitivity._check", "GradientCheck", "ffr_jax.check_gradient(...) (its return value)"),
+    "simulate_case": ("._api", "simulate_case", "ffr_jax.simulate(case, x)"),
+    "MinimalModel": ("._dynamics._model", "MinimalModel", "ffr_jax.Problem (its .model)"),
+    "Partition": ("._dynamics._model", "Partition", "ffr_jax.Problem (its .partition)"),
+    "choose_partition": ("._dynamics._model", "choose_partition", "ffr_jax.Problem (it chooses the partition)"),
+    "consistent_minimal_state": ("._dynamics._simulate", "consistent_minimal_state", "ffr_jax.simulate (it assembles the initial state)"),
+    "retained_eigenpairs": ("._design.modal.dense", "retained_eigenpairs", "a modal solver (ffr_jax.DenseModes, LanczosModes, AutoModes)"),
+    "quad_cell_data": ("._design.mesh", "quad_cell_data", "ffr_jax.from_meshio / read_mesh"),
+    "rod_domain": ("._design.geometry", "rod_domain", "ffr_jax.cases.slider_crank (the reference rod) or ffr_jax.DesignDomain"),
+    "rod_joint_nodes": ("._design.geometry", "rod_joint_nodes", "ffr_jax.Interface"),
+    "ElementOperator": ("._design.assembly", "ElementOperator", "ffr_jax.FEModel"),
+    "row_signs": ("._app._gradient_plot", "row_signs", "ffr_jax.plot_gradient"),
+    "body_motion": ("._app._animation", "body_motion", "ffr_jax.animate or ffr_jax.write_vtu_series"),
+    "MMAState": ("._optimize._mma", "MMAState", "ffr_jax.MMA (its state is internal)"),
+    "Checkpoint": ("._app._checkpoint", "Checkpoint", "ffr_jax.load_checkpoint"),
+    "save_checkpoint": ("._app._checkpoint", "save_checkpoint", "ffr_jax.optimize(..., directory=...) (it writes the checkpoints)"),
+    "restore_opt_state": ("._app._checkpoint", "restore_opt_state", "ffr_jax.optimize(..., resume=True)"),
+    "FlexibleRodCase": ("._dynamics._case", "FlexibleRodCase", "ffr_jax.Case"),
+}
+
+
+def __getattr__(name: str):
+    if name in _DEPRECATED:
+        module, attribute, instead = _DEPRECATED[name]
+        _warnings.warn(f"ffr_jax.{name} is deprecated and will be removed in the next release; use {instead}.",
+                       DeprecationWarning, stacklevel=2)
+        return getattr(_importlib.import_module(module, __name__), attribute)
+    raise AttributeError(f"module 'ffr_jax' has no attribute {name!r}")
+
+
+# The public names: everything above except the modules that import hooks may add (e.g. jaxtyping's).
+__all__ = sorted(name for name, value in globals().items()
+                 if not name.startswith("_") and (name == "cases" or not isinstance(value, type(_warnings))))

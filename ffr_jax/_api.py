@@ -13,6 +13,8 @@ there, and reach the caller as the package's [`DesignError`][] or [`SimulationEr
 message first ([`clean_errors`][]).
 """
 
+import warnings
+
 import diffrax
 import equinox as eqx
 import numpy as np
@@ -163,46 +165,66 @@ def _route(target, method, solver, rtol, atol):
 
 # --- public functions -------------------------------------------------------------------------
 @clean_errors
-def simulate(target, *args, solver: diffrax.AbstractSolver | None = None, rtol: float = 1e-10, atol: float = 1e-12,
-             ts=None, dense: bool = False, max_steps: int = 1_000_000, adjoint: diffrax.AbstractAdjoint | None = None,
-             dt0: float | None = None, **kwargs) -> Trajectory:
-    """Simulate a [`Problem`][] (or a case at design `x`): `simulate(problem)`, `simulate(case, x)`.
+def simulate(target, x: DesignsInput | None = None, *_legacy, solver: diffrax.AbstractSolver | None = None,
+             rtol: float = 1e-10, atol: float = 1e-12, ts=None, dense: bool = False, max_steps: int = 1_000_000,
+             adjoint: diffrax.AbstractAdjoint | None = None, dt0: float | None = None, **_legacy_kwargs) -> Trajectory:
+    """Simulate a [`Problem`][ffr_jax.Problem], or a case at design `x`: `simulate(problem)`,
+    `simulate(case, x)`.
 
     **Arguments:**
-    - `target`: a [`Problem`][], or a case followed by its design `x`. (The older form
-      `simulate(model, scene, t0, t1, y_r0, z_r0, integrand=..., jump_ts=...)` from consistent
-      redundant initial conditions still works.)
+    - `target`: a [`Problem`][ffr_jax.Problem], or a case; `x`: the case's design (not for a problem).
     - `solver`: any diffrax solver (default `Dopri8()`: the retained modes make the equations
       mildly stiff; on the reference case explicit 5th-order `Tsit5()` needs about 18,000 steps at
       every rtol from 1e-6 to 1e-9, its stability limit, Dopri8 4,700-6,400; benchmarks/RESULTS.md).
     - `rtol`, `atol`: step-size control tolerances (default: the paper's 1e-10 / 1e-12).
     - `ts`: output times (default: `t1` only); `dense`: keep the dense interpolant.
-    - `max_steps`: diffrax step budget; `adjoint`: diffrax adjoint for differentiating through it.
+    - `max_steps`: diffrax step budget; `adjoint`: diffrax adjoint for differentiating through it;
+      `dt0`: the first step (problems only; default: diffrax's estimate).
 
-    **Returns:** a [`Trajectory`][] with the independent and all redundant coordinates and
-    velocities at the output times, and `psi`.
+    **Returns:** a [`Trajectory`][ffr_jax.Trajectory] with the independent and all redundant
+    coordinates and velocities at the output times, and `psi`.
+
+    **Example:**
+    ```python
+    import ffr_jax as fj
+    case = fj.cases.slider_crank(12, 2, 6, 0.3)
+    trajectory = fj.simulate(case, case.initial_design(0.5), ts=jnp.linspace(0.0, 0.3, 31))
+    print(trajectory.psi, trajectory.positions.shape)
+    ```
     """
     _check_options("ffr_jax.simulate", rtol, atol, max_steps)
     _check_ts(ts)
+    if isinstance(target, (Problem, Case)) and (_legacy or _legacy_kwargs):
+        raise ValueError("simulate(problem) and simulate(case, x) take only keyword options (solver, rtol, atol, ts, "
+                         "dense, max_steps, adjoint, dt0).")
     if isinstance(target, Problem):
         _check_target(target)
-        if args or kwargs:
-            raise ValueError("simulate(problem, ...) takes only keyword options (solver, rtol, atol, ts, ...).")
+        if x is not None:
+            raise ValueError("simulate(problem, ...) takes no design: a problem's parameters are in its scene "
+                             "(simulate(case, x) simulates a case at design x).")
         return _simulate_problem(target, solver, rtol, atol, ts, dense, max_steps, adjoint, dt0)
     if isinstance(target, Case):
-        if len(args) != 1 or kwargs:
-            raise ValueError("simulate(case, x, ...) takes the design x and keyword options.")
-        return _simulate_case(target, _design(target, args[0], "simulate"), solver, rtol, atol, ts, dense, max_steps,
+        if x is None:
+            raise ValueError("simulate(case, x): give the case's design x (e.g. case.initial_design(0.5)).")
+        return _simulate_case(target, _design(target, x, "simulate"), solver, rtol, atol, ts, dense, max_steps,
                               adjoint)
-    return simulate_redundant(target, *args, solver=solver, rtol=rtol, atol=atol, ts=ts, dense=dense,
-                              max_steps=max_steps, adjoint=adjoint, dt0=dt0, **kwargs)
+    if _legacy or _legacy_kwargs:  # simulate(model, scene, t0, t1, y_r0, z_r0, integrand=..., jump_ts=...)
+        warnings.warn("simulate(model, scene, t0, t1, y_r0, z_r0, ...) is deprecated and will be removed in the next "
+                      "release; build a ffr_jax.Problem from the scene and call simulate(problem).",
+                      DeprecationWarning, stacklevel=3)
+        return simulate_redundant(target, x, *_legacy, solver=solver, rtol=rtol, atol=atol, ts=ts, dense=dense,
+                                  max_steps=max_steps, adjoint=adjoint, dt0=dt0, **_legacy_kwargs)
+    raise ValueError(f"simulate: the target must be a ffr_jax.Problem or a case (e.g. ffr_jax.cases.slider_crank()), "
+                     f"got {type(target).__name__}.")
 
 
 @clean_errors
 def simulate_case(case: Case, x: DesignsInput, *, rtol: float = 1e-10, atol: float = 1e-12,
                   solver: diffrax.AbstractSolver | None = None, ts=None, dense: bool = False,
                   max_steps: int = 1_000_000, adjoint: diffrax.AbstractAdjoint | None = None) -> Trajectory:
-    """Simulate a case for design `x` with its objective integrated along (`simulate(case, x)`)."""
+    """Deprecated: `simulate(case, x)`."""
+    warnings.warn("ffr_jax.simulate_case is deprecated and will be removed in the next release; use "
+                  "ffr_jax.simulate(case, x).", DeprecationWarning, stacklevel=3)
     _check_options("ffr_jax.simulate_case", rtol, atol, max_steps)
     return _simulate_case(case, _design(case, x, "simulate_case"), solver, rtol, atol, ts, dense, max_steps, adjoint)
 

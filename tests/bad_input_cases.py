@@ -30,6 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import ffr_jax as fj
+from ffr_jax._app._checkpoint import Checkpoint, save_checkpoint
+from ffr_jax._design.geometry import rod_joint_nodes
+from ffr_jax._design.mesh import StructuredGrid
 
 NAN, INF = float("nan"), float("inf")
 # The small case: nx, ny, n_modes, t1 and the run-up time.
@@ -87,7 +90,7 @@ class Ctx:
         config = {"volume": 0.5, "optimizer": "adam", "lr": 0.02, "move": 0.05, "filter_radius": 1.5,
                   "method": "adjoint", "nx": 4, "ny": 2, "modes": 2, "t1": 0.05, "rtol": 1e-6, "atol": 1e-10,
                   "beta": 0.0, "beta_max": 32.0, "beta_every": 20, "eta": 0.5, "case": "slider-crank"}
-        fj.save_checkpoint(directory / "checkpoint.npz", fj.Checkpoint(1, x, tuple(leaves), history, config))
+        save_checkpoint(directory / "checkpoint.npz", Checkpoint(1, x, tuple(leaves), history, config))
         return directory
 
     def truncated_checkpoint(self, name: str) -> Path:
@@ -316,12 +319,12 @@ API_32 = [
 def _rod_with_detached_piece() -> fj.DesignedBody:
     """The small rod (4 x 2 Q4, 2 hinged-hinged modes) and a 0.1 m square element that shares no node with
     it: a rigid-body mode of the piece is the lowest eigenpair (omega^2 = -1e-6 of a scale 3.6e9)."""
-    grid = fj.StructuredGrid(4, 2, 1.0, 0.06)
+    grid = StructuredGrid(4, 2, 1.0, 0.06)
     nodes, elements = np.asarray(grid.nodes), np.asarray(grid.elements)
     n = len(nodes)
     piece = np.array([[0.4, 0.2], [0.5, 0.2], [0.5, 0.3], [0.4, 0.3]])
     mesh = fj.QuadMesh(np.vstack([nodes, piece]), np.vstack([elements, [[n, n + 1, n + 2, n + 3]]]))
-    a, b = fj.rod_joint_nodes(4, 2)
+    a, b = rod_joint_nodes(4, 2)
     return fj.DesignedBody(fj.FEModel(mesh, fj.Q4(), 0.01, 0.3), fj.DesignDomain(mesh), fj.SIMP(),
                            fj.ModalReduction(2, fj.HingedHinged(a, b), solver=fj.DenseModes()), (a, b))
 
@@ -329,13 +332,13 @@ def _rod_with_detached_piece() -> fj.DesignedBody:
 def _rod_with(extra_nodes=(), extra_elements=(), height=0.06, element=None, solver=None) -> fj.DesignedBody:
     """The small rod (4 x 2 elements, 2 hinged-hinged modes, markers A and B) with extra nodes and elements
     (indices of the extra nodes counted from the rod's node count)."""
-    grid = fj.StructuredGrid(4, 2, 1.0, height)
+    grid = StructuredGrid(4, 2, 1.0, height)
     nodes, elements = np.asarray(grid.nodes), np.asarray(grid.elements)
     n = len(nodes)
     extra = [[node if node >= 0 else n - 1 - node for node in e] for e in extra_elements]  # -1: the first extra node
     mesh = fj.QuadMesh(np.vstack([nodes, *([np.asarray(extra_nodes)] if len(extra_nodes) else [])]),
                        np.vstack([elements, *([np.asarray(extra)] if extra else [])]))
-    a, b = fj.rod_joint_nodes(4, 2)
+    a, b = rod_joint_nodes(4, 2)
     return fj.DesignedBody(fj.FEModel(mesh, element or fj.Q4(), 0.01, 0.3), fj.DesignDomain(mesh), fj.SIMP(),
                            fj.ModalReduction(2, fj.HingedHinged(a, b), solver=solver or fj.DenseModes()), (a, b))
 

@@ -14,6 +14,8 @@ import pytest
 from helpers import assert_close_relative, small_case
 
 import ffr_jax as fj
+from ffr_jax._design.geometry import rod_joint_nodes
+from ffr_jax._design.mesh import StructuredGrid
 import ffr_jax._design as fd
 
 # The two-body gradient check: psi is about 8e-6 and the elastic coordinates about 1e-6 here, so the
@@ -138,9 +140,9 @@ def test_design_map_and_case_refuse_bad_structure():
 def test_the_rod_case_forwards_its_designed_body():
     case = small_case()
     body = case.design
-    assert isinstance(body, fj.DesignedBody) and isinstance(case.mesh, fj.StructuredGrid)
+    assert isinstance(body, fj.DesignedBody) and isinstance(case.mesh, StructuredGrid)
     assert (case.mesh.nx, case.mesh.ny, case.n_modes) == (12, 2, 4) and case.n_design == 2 * 10
-    assert case.marker_nodes == fj.rod_joint_nodes(12, 2) and case.material == fj.SIMP()
+    assert case.marker_nodes == rod_joint_nodes(12, 2) and case.material == fj.SIMP()
     a, b = case.marker_nodes
     assert case.fixed_dofs == (2 * a, 2 * a + 1, 2 * b + 1), "hinged-hinged: u_x(A), u_y(A), u_y(B)"
     x = jnp.linspace(0.2, 0.9, case.n_design)

@@ -14,6 +14,7 @@ import scipy.linalg
 import pytest
 
 import ffr_jax as fj
+from ffr_jax._app._animation import body_motion
 from ffr_jax._app._cli import main
 
 # The case and solver settings of test_optimize.py's tiny CLI run: the compiled objective (the
@@ -143,7 +144,7 @@ def test_the_drawn_motion_keeps_the_joints(run_dir, case):
     # on the slider's line, at every frame (to the Newton tolerance of the dependent coordinates).
     x_phys = np.load(run_dir / "design.npz")["x_phys"]
     ts = np.linspace(case.t0, case.t1, 4)
-    rigid, elastic, _ = fj.body_motion(case, x_phys, ts)
+    rigid, elastic, _ = body_motion(case, x_phys, ts)
     nodes = rigid + elastic
     crank = case.scene_template.constraints[0]
     a, b = case.marker_nodes

@@ -27,6 +27,7 @@ import pytest
 from helpers import assert_close_relative
 
 import ffr_jax as fj
+from ffr_jax._design.domain import SOLID
 from ffr_jax._app._cli import main
 
 pytest.importorskip("gmsh")
@@ -60,7 +61,7 @@ def adjoint(link):
 def test_layout_passive_rims_and_markers(link):
     body = link.design
     mesh = body.mesh
-    rims = np.asarray(body.domain.role_array() == fj.SOLID)
+    rims = np.asarray(body.domain.role_array() == SOLID)
     assert link.n_design == mesh.n_elements - rims.sum() and 0 < rims.sum() < mesh.n_elements
     assert not np.any(np.isin(np.asarray(body.domain.design_elements), np.flatnonzero(rims))), \
         "no design variable on a rim element"

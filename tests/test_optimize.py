@@ -22,6 +22,7 @@ import pytest
 import scipy.optimize
 
 import ffr_jax as fj
+from ffr_jax._app._checkpoint import Checkpoint, restore_opt_state, save_checkpoint
 from ffr_jax._app._cli import main
 
 from helpers import small_case
@@ -461,7 +462,7 @@ def test_resume_with_other_settings_or_optimizer_is_refused(tmp_path):
         run(tmp_path, "adam", 8, resume=True, volume=0.5)
     checkpoint = fj.load_checkpoint(tmp_path / "checkpoint.npz")
     with pytest.raises(fj.CheckpointError, match="another optimizer"):
-        fj.restore_opt_state(checkpoint.opt_state_leaves, optax.sgd(0.1).init(jnp.zeros(4)))
+        restore_opt_state(checkpoint.opt_state_leaves, optax.sgd(0.1).init(jnp.zeros(4)))
 
 
 def test_new_run_does_not_overwrite_a_checkpoint(tmp_path):
@@ -473,8 +474,8 @@ def test_new_run_does_not_overwrite_a_checkpoint(tmp_path):
 @pytest.mark.parametrize("crash_in", ["savez", "replace"])
 def test_crash_while_writing_keeps_the_previous_checkpoint(tmp_path, monkeypatch, crash_in):
     path = tmp_path / "checkpoint.npz"
-    old = fj.Checkpoint(3, np.full(5, 0.25), (np.arange(3.0),), fj.History(*np.ones((3, 3))), {"a": 1})
-    fj.save_checkpoint(path, old)
+    old = Checkpoint(3, np.full(5, 0.25), (np.arange(3.0),), fj.History(*np.ones((3, 3))), {"a": 1})
+    save_checkpoint(path, old)
     new = old._replace(iteration=4, x=np.full(5, 0.75), history=fj.History(*np.ones((3, 4))))
 
     def savez_then_crash(f, **arrays):
@@ -489,7 +490,7 @@ def test_crash_while_writing_keeps_the_previous_checkpoint(tmp_path, monkeypatch
     else:
         monkeypatch.setattr(os, "replace", crash)
     with pytest.raises(OSError, match="simulated crash"):
-        fj.save_checkpoint(path, new)
+        save_checkpoint(path, new)
     monkeypatch.undo()
     kept = fj.load_checkpoint(path)
     assert kept.iteration == 3, "the previous checkpoint must survive a failed write"

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 import ffr_jax as fj
+from ffr_jax._app._animation import body_motion
+from ffr_jax._design.mesh import StructuredGrid, quad_cell_data
 from ffr_jax._design.domain import SOLID
 from ffr_jax._design.geometry import LinkMesh
 
@@ -84,14 +86,14 @@ def part(tmp_path_factory):
     _mesh_part(path)
     read = meshio.read(path)
     mesh = fj.from_meshio(read)
-    physical = fj.quad_cell_data(read)["gmsh:physical"]
+    physical = quad_cell_data(read)["gmsh:physical"]
     rims = physical == read.field_data["rims"][0]
     assert np.all(rims | (physical == read.field_data["design"][0])), "every quad is in one of the two surfaces"
     bores = tuple(_group_nodes(mesh, read, name) for name in ("bore_A", "bore_B"))
     domain = fj.DesignDomain.from_masks(mesh, solid=rims)
     link = LinkMesh(mesh, domain, bores, np.array([[0.0, 0.0], [LENGTH, 0.0]]), rims)
     case = fj.cases.slider_crank(t1=0.05, rod=fj.cases.link_body(link, 2))
-    assert not isinstance(case.mesh, fj.StructuredGrid) and case.n_design < mesh.n_elements
+    assert not isinstance(case.mesh, StructuredGrid) and case.n_design < mesh.n_elements
     return case, rims, bores
 
 
@@ -153,7 +155,7 @@ def test_vtu_series_carries_the_motion(part, tmp_path):
     datasets = ElementTree.parse(pvd).getroot().find("Collection").findall("DataSet")
     ts = np.linspace(case.t0, case.t1, FRAMES)
     np.testing.assert_array_equal([float(d.get("timestep")) for d in datasets], ts)
-    rigid, elastic, _ = fj.body_motion(case, x, ts)  # the same compiled program: the same numbers
+    rigid, elastic, _ = body_motion(case, x, ts)  # the same compiled program: the same numbers
     for k, dataset in enumerate(datasets):
         frame = meshio.read(pvd.parent / dataset.get("file"))
         np.testing.assert_array_equal(frame.points[:, :2], rigid[k], err_msg=f"placement at t = {ts[k]}")
@@ -170,7 +172,7 @@ def test_drawn_motion_keeps_the_joints_of_the_bores(part):
     # to the Newton tolerance of the dependent coordinates (1e-10 m, as tests/test_io.py).
     case, _, bores = part
     ts = np.linspace(case.t0, case.t1, FRAMES)
-    rigid, elastic, _ = fj.body_motion(case, _banded(case), ts)
+    rigid, elastic, _ = body_motion(case, _banded(case), ts)
     nodes = rigid + elastic
     pins = np.stack([np.asarray(case.scene_template.constraints[0].pin(t)) for t in ts])
     np.testing.assert_allclose(nodes[:, list(bores[0])].mean(axis=1), pins, atol=1e-10, err_msg="bore A on the pin")

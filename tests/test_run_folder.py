@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 import ffr_jax as fj
+from ffr_jax._app._checkpoint import Checkpoint, save_checkpoint
 from ffr_jax._app._run_lock import RunLock
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -155,7 +156,7 @@ def test_cli_reports_a_stopped_run_in_one_line(tmp_path, monkeypatch, fault):
         Path(directory).mkdir(parents=True, exist_ok=True)
         x = np.full(4, 0.5)
         history = fj.History(np.ones(1), np.full(1, 0.5), np.full(1, 0.01))
-        fj.save_checkpoint(Path(directory) / "checkpoint.npz", fj.Checkpoint(1, x, (), history, config))
+        save_checkpoint(Path(directory) / "checkpoint.npz", Checkpoint(1, x, (), history, config))
         if fault == "Ctrl-C":
             raise KeyboardInterrupt
         raise OSError(28, "No space left on device", str(Path(directory) / "log.csv"))

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import ffr_jax as fj
+from ffr_jax._dynamics._model import MinimalModel, choose_partition
 from ffr_jax._dynamics._body_dynamics import body_inertia_and_elastic_forces, body_mass_matrix, marker_position
 from ffr_jax._spatial import _rigid_body
 from ffr_jax._spatial._euler_parameters import angular_velocity, rotation_matrix
@@ -133,9 +134,9 @@ def test_hinge_first_acceleration_is_eulers_equation():
     scene = fj.Scene(bodies=(fj.Body("link", data),), constraints=(fj.SpatialRevolute(0, 0, (1.0, 0.0, 0.0)),),
                      forces=(fj.Gravity((0.0, 0.0, -G)),))
     positions = np.array([0, 0, 0, 1.0, 0, 0, 0])
-    partition = fj.choose_partition(scene, 0.0, positions)
+    partition = choose_partition(scene, 0.0, positions)
     assert partition.independent == (3, 4)  # e0 (gauge) and e1 (the hinge angle): regular at every angle
-    model = fj.MinimalModel(partition=partition, reference_dependent=jnp.asarray(positions[list(partition.dependent)]))
+    model = MinimalModel(partition=partition, reference_dependent=jnp.asarray(positions[list(partition.dependent)]))
     omega_dot = _initial_angular_acceleration(model, scene, jnp.asarray(positions[3:5]), jnp.zeros(2))
     expected = m * G * l / j_origin[0, 0]
     np.testing.assert_allclose(omega_dot, [-expected, 0.0, 0.0], atol=ROUND_OFF * expected)
@@ -293,9 +294,9 @@ def test_angle_driver_turns_a_hinged_body_through_full_turns():
                                   fj.EulerNormalisation(0), fj.SphericalJoint(1, 0, 0, 1)),
                      forces=(fj.Gravity((0.0, 0.0, -G)),))
     positions = np.concatenate([np.zeros(3), [1.0, 0.0, 0.0, 0.0], [a, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]])
-    partition = fj.choose_partition(scene, 0.0, positions)
+    partition = choose_partition(scene, 0.0, positions)
     assert partition.dependent == tuple(range(10))  # the crank's 7 coordinates and the bob's R
-    model = fj.MinimalModel(partition=partition, reference_dependent=jnp.asarray(positions[:10]),
+    model = MinimalModel(partition=partition, reference_dependent=jnp.asarray(positions[:10]),
                             dependent_guess=_driven_guess)
     ts = jnp.linspace(0.0, 1.0, 9)  # every eighth of a second: quarter turns, through 0, pi, 2 pi, ...
     y_r, z_r = _driven_states(model, scene, ts, jnp.asarray(positions[10:]), jnp.zeros(4))
