@@ -17,6 +17,8 @@ from .._scene._body_data import BodyData
 from .._scene._scene import Scene
 from .._scene._stiffening import GeometricStiffening
 from .designed_body import DesignedBody
+from .._spatial._flexible_body_data import SpatialFlexibleBodyData
+from .._spatial._lift import designed_body_data as lifted_body_data
 from .modal.basis import ModalBasis
 
 
@@ -58,6 +60,9 @@ class DesignMap(AbstractDesignMap):
     `body_data`) come in the form of the design: a dict for a dict, one body's result for an
     array. Gradients with respect to the designs (`ffr_jax.value_and_grad(case, designs)`) have
     the structure of the designs.
+
+    A scene body with [`SpatialFlexibleBodyData`][] gets the designed (planar) body lifted into space
+    (`ffr_jax._spatial._lift`: nodes at `z = 0`, in-plane modes).
 
     The map recomputes, besides the body data, the design-dependent data of each designed body's
     [`GeometricStiffening`][] in the scene (`K_geo(x_b)`); a scene without such an effect
@@ -176,6 +181,12 @@ class DesignMap(AbstractDesignMap):
             index = scene.body_index(name)
             stiffening = [k for k, force in enumerate(scene.forces)
                           if isinstance(force, GeometricStiffening) and force.body == index]
+            if isinstance(scene.bodies[index].data, SpatialFlexibleBodyData):  # a planar design lifted into space
+                if stiffening:
+                    raise ValueError(f"Geometric stiffening of the spatial body {name!r} is not available yet; remove "
+                                     "the GeometricStiffening of that body.")
+                scene = eqx.tree_at(lambda s: s.bodies[index].data, scene, lifted_body_data(body, by_body[name]))
+                continue
             data, k_geo = body.body_data_and_geometric_stiffness(by_body[name], stiffening=bool(stiffening))
             scene = eqx.tree_at(lambda s: s.bodies[index].data, scene, data)
             for k in stiffening:

@@ -17,8 +17,8 @@ and the virtual work `sum_n delta r_n^T M rddot_n` gives `M_b(y_b) zdot_b + h_om
 - `h_omega,q = -theta'^2 (j1 + M_qq q) + 2 theta' G q'`, and the inner force `h_e = K_qq q`.
 
 A body is planar or spatial by its data: the functions below take [`BodyData`][] (planar, above) or
-[`SpatialBodyData`][] (a rigid spatial body in Euler parameters, `ffr_jax._spatial._rigid_body`) and
-dispatch on that type at trace time, so a planar scene traces exactly the planar code.
+[`SpatialBodyData`][] (a rigid spatial body in Euler parameters, `ffr_jax._spatial._rigid_body`) or
+[`SpatialFlexibleBodyData`][] (a flexible spatial body, `ffr_jax._spatial._flexible_body`) and dispatch on that type at trace time, so a planar scene traces exactly the planar code.
 """
 
 import jax.numpy as jnp
@@ -26,6 +26,8 @@ import jax.numpy as jnp
 from .._scene._body_data import BodyData
 from .._spatial import _rigid_body as spatial
 from .._spatial._body_data import SpatialBodyData
+from .._spatial import _flexible_body as spatial_flexible
+from .._spatial._flexible_body_data import SpatialFlexibleBodyData
 
 
 def rotation(theta):
@@ -64,6 +66,8 @@ def body_coordinate_names(data: BodyData | SpatialBodyData) -> tuple[str, ...]:
     """Names of a body's coordinates: `R_x, R_y, theta, q_1, ...` (planar) or `R_x, R_y, R_z, e0..e3` (spatial)."""
     if isinstance(data, SpatialBodyData):
         return ("R_x", "R_y", "R_z", "e0", "e1", "e2", "e3")
+    if isinstance(data, SpatialFlexibleBodyData):
+        return ("R_x", "R_y", "R_z", "e0", "e1", "e2", "e3") + tuple(f"q_{k + 1}" for k in range(data.n_modes))
     return ("R_x", "R_y", "theta") + tuple(f"q_{k + 1}" for k in range(data.n_modes))
 
 
@@ -71,6 +75,8 @@ def body_strain_energy(data: BodyData | SpatialBodyData, y_b):
     """`1/2 q^T K_qq q` of a flexible body (zero for a rigid spatial body)."""
     if isinstance(data, SpatialBodyData):
         return jnp.zeros((), y_b.dtype)
+    if isinstance(data, SpatialFlexibleBodyData):
+        return spatial_flexible.strain_energy(data, y_b)
     q = y_b[3:]
     return 0.5 * q @ data.modal_stiffness @ q
 
@@ -79,6 +85,8 @@ def body_mass_matrix(data: BodyData | SpatialBodyData, y_b):
     """Mass matrix `M_b(y_b)`, `(3 + n_q, 3 + n_q)` (planar) or `(7, 7)` (spatial), symmetric positive definite."""
     if isinstance(data, SpatialBodyData):
         return spatial.mass_matrix(data, y_b)
+    if isinstance(data, SpatialFlexibleBodyData):
+        return spatial_flexible.mass_matrix(data, y_b)
     _, theta, q = split_body_coordinates(y_b, data.n_modes)
     s_u = data.first_moment + _matvec(data.modal_moment, q)
     mq = data.inertia_q + _matvec(data.modal_mass, q)
@@ -97,6 +105,8 @@ def body_inertia_and_elastic_forces(data: BodyData | SpatialBodyData, y_b, z_b):
     """`-h_omega - h_e`: the quadratic-velocity (Coriolis, centrifugal, gyroscopic) and elastic forces."""
     if isinstance(data, SpatialBodyData):
         return spatial.inertia_forces(data, y_b, z_b)
+    if isinstance(data, SpatialFlexibleBodyData):
+        return spatial_flexible.inertia_and_elastic_forces(data, y_b, z_b)
     _, theta, q = split_body_coordinates(y_b, data.n_modes)
     _, dtheta, dq = split_body_coordinates(z_b, data.n_modes)
     s_u = data.first_moment + _matvec(data.modal_moment, q)
@@ -111,6 +121,8 @@ def marker_position(data: BodyData | SpatialBodyData, marker: int, y_b):
     """Inertial position `r_P = R + A(theta) (c_P + Phi_P q)` of body marker `marker` (`R + A(p) u_P` spatial)."""
     if isinstance(data, SpatialBodyData):
         return spatial.marker_position(data, marker, y_b)
+    if isinstance(data, SpatialFlexibleBodyData):
+        return spatial_flexible.marker_position(data, marker, y_b)
     r, theta, q = split_body_coordinates(y_b, data.n_modes)
     return r + rotate(theta, data.marker_positions[marker] + _matvec(data.marker_modes[marker], q))
 
@@ -119,4 +131,6 @@ def body_kinetic_energy(data: BodyData | SpatialBodyData, y_b, z_b):
     """`T = 1/2 z_b^T M_b(y_b) z_b` from the body data (spatial: without the radial rate of `p`, which carries none)."""
     if isinstance(data, SpatialBodyData):
         return spatial.kinetic_energy(data, y_b, z_b)
+    if isinstance(data, SpatialFlexibleBodyData):
+        return spatial_flexible.kinetic_energy(data, y_b, z_b)
     return 0.5 * z_b @ body_mass_matrix(data, y_b) @ z_b

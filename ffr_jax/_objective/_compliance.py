@@ -12,5 +12,6 @@ class Compliance(AbstractIntegrand):
 
     def __call__(self, t, y_r, z_r, scene):
         del t, z_r
-        q = scene.body_coordinates(self.body, y_r)[3:]
+        y_b = scene.body_coordinates(self.body, y_r)
+        q = y_b[y_b.shape[0] - scene.bodies[self.body].data.n_modes:]  # the modal coordinates come last (planar, spatial)
         return q @ scene.bodies[self.body].data.modal_stiffness @ q

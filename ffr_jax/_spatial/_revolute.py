@@ -5,7 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._scene._base import AbstractConstraint
+from . import _flexible_body
 from ._euler_parameters import rotation_matrix
+from ._flexible_body_data import SpatialFlexibleBodyData
 from ._spherical import ground_point, other_point, require_spatial
 
 
@@ -29,12 +31,23 @@ def normals(axis: np.ndarray) -> np.ndarray:
     return np.stack([b1, np.cross(axis, b1)])
 
 
+def marker_axis(scene, body: int, marker: int, axis_body, y_r):
+    """The inertial direction of the body-frame direction `axis_body` at marker `marker` of spatial body `body`:
+    `A(p) a` for a rigid body, `A(p) (a + (Psi_P q) x a)` for a flexible one (its elastic rotation at the marker)."""
+    y_b = scene.body_coordinates(body, y_r)
+    data = scene.bodies[body].data
+    if isinstance(data, SpatialFlexibleBodyData):
+        return _flexible_body.marker_axis(data, marker, y_b, axis_body)
+    return rotation_matrix(y_b[3:7]) @ axis_body
+
+
 class SpatialRevolute(AbstractConstraint):
     """A hinge: marker `marker_i` of body `body_i` on marker `marker_j` of body `body_j`, and the body axis
     `axis_i` of body `i` parallel to the axis `axis_j` of body `j`.
 
     Five equations: `r_i(P) - r_j(Q) = 0` and `b_k . (A_i a_i) = 0` for the two normals `b_1, b_2` of
-    `A_j a_j`. `body_j = -1` (the default) makes `point` and `axis_j` inertial (a hinge to the ground).
+    `A_j a_j` (at a flexible body's marker the axis turns with the elastic rotation `Psi q` there).
+    `body_j = -1` (the default) makes `point` and `axis_j` inertial (a hinge to the ground).
 
     **Arguments:**
     - `body_i`, `marker_i`, `axis_i`: the first body, its joint marker and hinge axis (body frame).
@@ -68,7 +81,7 @@ class SpatialRevolute(AbstractConstraint):
     def residual(self, t, y_r, scene):
         require_spatial(scene, (self.body_i, self.body_j), "SpatialRevolute")
         position = scene.marker_position(self.body_i, self.marker_i, y_r) - other_point(self, t, y_r, scene)
-        a_i = rotation_matrix(scene.body_coordinates(self.body_i, y_r)[3:7]) @ self.axis_i
-        b = self.normals_j if self.body_j < 0 else self.normals_j @ rotation_matrix(
-            scene.body_coordinates(self.body_j, y_r)[3:7]).T
+        a_i = marker_axis(scene, self.body_i, self.marker_i, self.axis_i, y_r)
+        b = self.normals_j if self.body_j < 0 else jnp.stack(
+            [marker_axis(scene, self.body_j, self.marker_j, n, y_r) for n in self.normals_j])
         return jnp.concatenate([position, b @ a_i])

@@ -6,6 +6,7 @@ import numpy as np
 
 from .._scene._base import AbstractConstraint
 from ._body_data import SpatialBodyData
+from ._flexible_body_data import SpatialFlexibleBodyData
 
 
 def ground_point(point, name: str):
@@ -19,7 +20,7 @@ def ground_point(point, name: str):
 def require_spatial(scene, bodies, name: str) -> None:
     """A `ValueError` (at trace time) when one of `bodies` (ground: negative) is not a spatial body."""
     for b in bodies:
-        if b >= 0 and not isinstance(scene.bodies[b].data, SpatialBodyData):
+        if b >= 0 and not isinstance(scene.bodies[b].data, (SpatialBodyData, SpatialFlexibleBodyData)):
             raise ValueError(f"{name} joins spatial bodies, but body {b} ({scene.bodies[b].name!r}) is planar: give it "
                              "ffr_jax.spatial_rigid_body_data, or use the planar joints (Revolute, GroundRevolute).")
 

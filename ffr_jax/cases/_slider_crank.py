@@ -18,6 +18,7 @@ from .._scene._point_on_line import PointOnLine
 from .._scene._prescribed_point import CrankPin
 from .._scene._scene import Scene
 from ._rod import rod_body
+from ._spatial_slider_crank import spatial_slider_crank_problem
 
 
 def slider_crank_guess(t, y, scene):
@@ -55,6 +56,7 @@ def slider_crank(
     material: SIMP = SIMP(),
     modal_solver: AbstractModalSolver = AutoModes(),
     rod: DesignedBody | None = None,
+    spatial: bool = False,
 ) -> Case:
     """The flexible slider–crank (REFERENCE_CASE.md, paper Sect. 4) and its family of small variants.
 
@@ -76,6 +78,11 @@ def slider_crank(
     - `rod`: another designed connecting rod (e.g. the rod read from a mesh file, or any body whose
       marker 0 is the crank pin A and marker 1 the slider point B, both on the frame's x-axis);
       default [`rod_body`][]`(nx, ny, n_modes, ...)` with the arguments above.
+    - `spatial`: build the same mechanism from spatial bodies and joints (issue 26): the rod's design lifted to
+      3D (nodes at `z = 0`, [`SpatialFlexibleBodyData`][]), a rigid spatial crank on a ground hinge about `z`
+      with the same driven angle, hinged to the rod at A, and B on the plane `y = 0`; the rod's coordinates are
+      `(R, p, q)` (Euler parameters), independent `q` as in the planar case, and `psi` and its gradient are the
+      planar case's (`ffr_jax.cases._spatial_slider_crank`).
 
     **Returns:** a [`Case`][]: the [`Problem`][] with the rod's compliance as objective and a
     [`DesignMap`][] of the rod (`case.design` is its [`DesignedBody`][], see [`rod_body`][]).
@@ -98,6 +105,11 @@ def slider_crank(
     rod = Body("rod", body.uniform_body_data())
     _check_eccentricity(eccentricity, float(rod.data.marker_positions[1, 0]))
     law = RampLaw(t_ramp=t_ramp, angle_at_ramp=speed * t_ramp / 2, speed=speed)
+    if not isinstance(spatial, bool):
+        raise ValueError(f"slider_crank(spatial=...) must be True or False, got {spatial!r}.")
+    if spatial:
+        return Case(problem=spatial_slider_crank_problem(body, eccentricity, law, t1),
+                    design_map=DesignMap({"rod": body}))
     scene = Scene(
         bodies=(rod,),
         constraints=(
