@@ -4,8 +4,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .h8 import gauss_points_2x2x2, hex_jacobian_samples, trilinear
-from .solid_base import AbstractSolidElement, check_poisson, isotropic, jacobians, nodal_mass, strain_matrix
+from .h8 import check_hex_corners, gauss_points_2x2x2, hex_jacobian_samples, trilinear
+from .solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, isotropic, jacobians, nodal_mass, strain_matrix
 
 
 class H11(AbstractSolidElement):
@@ -46,6 +46,11 @@ class H11(AbstractSolidElement):
 
     def reordered(self) -> np.ndarray:
         return np.array([4, 5, 6, 7, 0, 1, 2, 3])
+
+    def check(self, xyz, min_ratio=MIN_JACOBIAN_RATIO, reorder_hint=""):
+        """The checks of [`H8`][]."""
+        super().check(xyz, min_ratio, reorder_hint)
+        check_hex_corners(type(self).__name__, np.asarray(xyz, dtype=np.float64))
 
     def matrices(self, xyz: np.ndarray, poisson: float) -> tuple[np.ndarray, np.ndarray]:
         xyz = np.asarray(xyz, dtype=np.float64)

@@ -4,7 +4,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .solid_base import AbstractSolidElement, check_poisson, isotropic, jacobians, nodal_mass, strain_matrix
+from .solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, isotropic, jacobian_determinants, jacobians, nodal_mass, strain_matrix
 
 # Corners of the reference cube in the VTK/meshio order: the face zeta = -1 counter-clockwise seen
 # from +zeta, then the face zeta = +1 above it.
@@ -28,9 +28,27 @@ def gauss_points_2x2x2():
 
 
 def hex_jacobian_samples(xyz: np.ndarray) -> np.ndarray:
-    """`det J` of the trilinear map at the 8 corners, the 8 Gauss points and the centre, `(m, 17)`."""
-    points = list(HEX_CORNERS) + [p for p, _ in gauss_points_2x2x2()] + [(0.0, 0.0, 0.0)]
-    return np.stack([jacobians(trilinear(*p)[1], xyz)[0] for p in points], axis=1)
+    """`det J` of the trilinear map at the 8 Gauss points and the centre, `(m, 9)`.
+
+    Checked where the element is integrated: the corner Jacobians of acceptable distorted
+    hexahedra may be slightly negative (the MacNeal–Harder 3D patch has one at -0.05 of the
+    largest), and the element matrices only see `det J` at the Gauss points (and at the centre, H11).
+    """
+    points = [p for p, _ in gauss_points_2x2x2()] + [(0.0, 0.0, 0.0)]
+    return np.stack([jacobian_determinants(trilinear(*p)[1], xyz) for p in points], axis=1)
+
+
+def check_hex_corners(name: str, xyz: np.ndarray) -> None:
+    """Refuse hexahedra with a vanishing corner Jacobian: coincident corners or collapsed edges
+    (a wedge or pyramid written as a hexahedron), which the Gauss-point check lets through."""
+    from .solid_base import DEGENERATE_RATIO, _format_ids
+
+    det = np.stack([jacobian_determinants(trilinear(*c)[1], xyz) for c in HEX_CORNERS], axis=1)
+    size = np.sqrt(np.max(np.sum((xyz[:, :, None] - xyz[:, None]) ** 2, axis=-1), axis=(1, 2)))
+    bad = np.flatnonzero(np.any(np.abs(det) <= DEGENERATE_RATIO * size[:, None] ** 3, axis=1))
+    if bad.size:
+        raise ValueError(f"{name} elements {_format_ids(bad)} are degenerate (a corner Jacobian vanishes: coincident "
+                         "corners or collapsed edges, e.g. a wedge written as a hexahedron); remesh them.")
 
 
 class H8(AbstractSolidElement):
@@ -51,6 +69,12 @@ class H8(AbstractSolidElement):
 
     def reordered(self) -> np.ndarray:
         return np.array([4, 5, 6, 7, 0, 1, 2, 3])
+
+    def check(self, xyz, min_ratio=MIN_JACOBIAN_RATIO, reorder_hint=""):
+        """The Jacobian checks of [`check_jacobians`][] at the Gauss points and the centre, and no vanishing
+        corner Jacobian."""
+        super().check(xyz, min_ratio, reorder_hint)
+        check_hex_corners(type(self).__name__, np.asarray(xyz, dtype=np.float64))
 
     def matrices(self, xyz: np.ndarray, poisson: float) -> tuple[np.ndarray, np.ndarray]:
         xyz = np.asarray(xyz, dtype=np.float64)

@@ -62,6 +62,11 @@ def jacobians(dn: np.ndarray, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.det(jac), np.linalg.inv(jac)
 
 
+def jacobian_determinants(dn: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """`det J` at one point for each element, `(m,)` (no inverse: safe on degenerate elements)."""
+    return np.linalg.det(dn @ xyz)
+
+
 def nodal_mass(n_points, xyz: np.ndarray, shape_functions) -> np.ndarray:
     """Consistent mass `M_e = sum_g N^T N det J w_g` for `rho = 1`, `(m, 3n, 3n)`.
 

@@ -4,7 +4,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson, isotropic, jacobians,
+from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson, isotropic, jacobian_determinants, jacobians,
                          nodal_mass, strain_matrix)
 
 # Reference vertices (volume coordinates L1 = 1 - xi - eta - zeta, L2 = xi, L3 = eta, L4 = zeta) and
@@ -76,7 +76,7 @@ class Tet10(AbstractSolidElement):
     def jacobian_samples(self, xyz: np.ndarray) -> np.ndarray:
         points = list(TET_VERTICES) + [0.5 * (TET_VERTICES[a] + TET_VERTICES[b]) for a, b in TET_EDGES]
         points += [p for p, _ in gauss_points_4()] + [(0.25, 0.25, 0.25)]
-        return np.stack([jacobians(quadratic_tet(*p)[1], xyz)[0] for p in points], axis=1)
+        return np.stack([jacobian_determinants(quadratic_tet(*p)[1], xyz) for p in points], axis=1)
 
     def reordered(self) -> np.ndarray:
         return np.array([0, 2, 1, 3, 6, 5, 4, 7, 9, 8])
