@@ -1,30 +1,19 @@
 """The aggregated (p-norm) stress of a designed body over its elements and the motion, with its design gradient."""
 
 import equinox as eqx
-import jax.numpy as jnp
 
 from .. import _api
 from .._compiled import Program
-from .._design.design_map import DesignMap
 from .._dynamics._case import Case
 from .._errors import clean_errors
 from .._sensitivity._finite_differences import FiniteDifferences
+from .._outputs._peak_stress import designed_body_index
 from .._outputs._relaxed_stresses import relaxed_stress_modes
 from ._objective import Objective
 from ._stress_measure import StressMeasure, check_stress_options
 
 
-def designed_body_index(case: Case, where: str) -> int:
-    """The scene index of the case's one designed body, or a `ValueError` saying how many it has."""
-    if not isinstance(case, Case):
-        raise ValueError(f"{where} takes a case (e.g. ffr_jax.cases.slider_crank(...)), got {type(case).__name__}.")
-    names = case.design_map.names if isinstance(case.design_map, DesignMap) else ()
-    if len(names) != 1:
-        raise ValueError(f"{where} measures the stress of one designed body; this case designs {list(names)}.")
-    return case.problem.scene.body_index(names[0])
-
-
-def stress_problem(case: Case, x, limit: float, power: float, relaxation: float):
+def stress_problem(case: Case, x, limit, power, relaxation):
     """The case's problem at design `x` with the [`StressMeasure`][] of its designed body as the objective."""
     index = case.problem.scene.body_index(case.design_map.names[0])
     measure = StressMeasure(relaxed_stress_modes(case.design, x, relaxation), index, limit, power)
@@ -45,7 +34,7 @@ _aggregated = Program(_aggregated_fn, "the aggregated stress and its design grad
 
 
 @clean_errors
-def aggregated_stress(case: Case, x, limit: float, *, power: float = 8.0, relaxation: float = 0.5,
+def aggregated_stress(case, x, limit, *, power=8.0, relaxation=0.5,
                       method="adjoint", rtol: float = 1e-10, atol: float = 1e-12, solver=None,
                       max_steps: int = 200_000):
     """`(sigma_PN, d sigma_PN / dx)`: the `P`-norm of the relaxed von Mises stress of the case's designed body
@@ -73,8 +62,8 @@ def aggregated_stress(case: Case, x, limit: float, *, power: float = 8.0, relaxa
 
     **Returns:** `(sigma_PN, grad)`, a scalar in Pa and an array shaped like `x`.
     """
-    designed_body_index(case, "ffr_jax.aggregated_stress")
     limit, power = check_stress_options(limit, power, relaxation, "ffr_jax.aggregated_stress")
+    designed_body_index(case, "ffr_jax.aggregated_stress")
     method = _api.sensitivity_method(method)
     if isinstance(method, FiniteDifferences):
         raise ValueError("ffr_jax.aggregated_stress: finite differences difference the design itself; difference "
@@ -83,7 +72,3 @@ def aggregated_stress(case: Case, x, limit: float, *, power: float = 8.0, relaxa
     x = _api._design(case, x, "ffr_jax.aggregated_stress")
     return _aggregated(case, x, limit, power, float(relaxation), method, rtol, atol, solver, max_steps)
 
-
-def stress_psi(case: Case, x, limit: float, *, power: float = 8.0, relaxation: float = 0.5):
-    """`psi = int F dt` of the [`StressMeasure`][] alone (no gradient; for checks)."""
-    return jnp.asarray(_api.objective(stress_problem(case, case.check(x), limit, power, relaxation)))

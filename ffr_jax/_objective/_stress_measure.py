@@ -59,7 +59,7 @@ class StressMeasure(AbstractIntegrand):
     limit: float = eqx.field(static=True)
     power: float = eqx.field(static=True)
 
-    def __init__(self, stress_modes, body: int, limit: float, power: float = 8.0):
+    def __init__(self, stress_modes, body: int, limit, power=8.0):
         self.limit, self.power = check_stress_options(limit, power)
         if np.ndim(stress_modes) != 4 or np.shape(stress_modes)[1:3] != (4, 3):
             raise ValueError(f"StressMeasure needs stress modes of shape (n_elements, 4, 3, n_q) (see "

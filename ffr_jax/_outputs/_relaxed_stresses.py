@@ -7,7 +7,7 @@ from .._design.designed_body import DesignedBody
 from .._design.geometric_stiffness import element_stresses, gauss_gradients
 
 
-def relaxed_stress_modes(body: DesignedBody, x, relaxation: float = 0.5):
+def relaxed_stress_modes(body: DesignedBody, x, relaxation=0.5):
     """Relaxed plane stresses of each shape vector of the body's modal basis at design `x`.
 
     `sigma_hat_k = x_e^s E0 D B_g phi_k` at the 2x2 Gauss points of every element: the stress the
