@@ -322,7 +322,8 @@ def test_applied_force_direction_is_checked():
 
 # --- the README's own mechanism ---------------------------------------------------------------
 def _readme_block(heading: str) -> str:
-    text = (Path(__file__).parent.parent / "README.md").read_text()
+    # The README's "Your own mechanism" moved to the docs page on problems and scenes (issue 29).
+    text = (Path(__file__).parent.parent / "docs" / "concepts" / "problem.md").read_text()
     section = text[text.index(heading):]
     return section[section.index("```python") + len("```python"):section.index("```", section.index("```python") + 9)]
 
@@ -335,7 +336,7 @@ def test_readme_own_mechanism_runs_and_its_gradient_is_right(capsys):
     fixture (`a int T dt + b |r_P(t1) - r*|^2` with `(a, b) = (1, 0)`, released at rest), so that they
     run through the forward program compiled for it instead of compiling one more."""
     namespace = {}
-    exec(compile(_readme_block("## Your own mechanism"), "README.md", "exec"), namespace)
+    exec(compile(_readme_block("## Your own mechanism"), "docs/concepts/problem.md", "exec"), namespace)
     problem, grad = namespace["problem"], namespace["grad"]
     assert problem.scene.n_coordinates == 6 and problem.n_independent == 1
     same = fj.Problem(crank_arm_scene(), 1.0, positions=CRANK_ARM_POSITIONS, velocities=[0.0],
