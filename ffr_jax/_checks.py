@@ -7,6 +7,8 @@ A traced value (a tolerance passed as a JAX array under `jax.jit`) is let throug
 
 import math
 import numbers
+import os
+import tempfile
 from pathlib import Path
 
 import jax
@@ -23,6 +25,22 @@ from ._errors import DesignError
 # round-off noise, so steps are rejected at random until the step budget runs out.
 RTOL_MIN = 1e-14
 RTOL_MAX = 1e-2
+
+
+def float64_on(where: str) -> None:
+    """float64 is on (`jax_enable_x64`), or a `ValueError` that says how to turn it back on.
+
+    `import ffr_jax` turns it on; a user who turns it off afterwards (or calls inside
+    `jax.experimental.disable_x64()`) would otherwise get an error from deep inside a traced
+    program (`lax.add requires arguments to have the same dtypes`, issue 32).
+    """
+    if jax.dtypes.canonicalize_dtype(np.float64) != np.float64:
+        raise ValueError(
+            f"{where}: ffr_jax computes in float64, but JAX's float64 mode (jax_enable_x64) is off: it was turned "
+            "off after `import ffr_jax`, which turns it on. Turn it back on with "
+            "jax.config.update('jax_enable_x64', True) (or leave the jax.experimental.disable_x64() block) "
+            "before calling ffr_jax."
+        )
 
 
 def is_traced(value) -> bool:
@@ -121,7 +139,22 @@ def design_array(x, of_body: str = "") -> jnp.ndarray:
                           "Pass x.real if the imaginary part is meant to be zero.")
     if not (jnp.issubdtype(dtype, jnp.floating) or jnp.issubdtype(dtype, jnp.integer) or dtype == jnp.bool_):
         raise DesignError(f"The design vector{of_body} must hold real numbers, got dtype {dtype}.")
-    return jnp.asarray(x, dtype=jnp.float64)
+    return _uncommitted(jnp.asarray(x, dtype=jnp.float64))
+
+
+def _uncommitted(x):
+    """`x`, or an uncommitted copy of it where it is committed to the device an uncommitted array goes to.
+
+    A committed array (`jax.device_put(x, device)`) is placed by its sharding, which is part of the key
+    of every compiled program's cache: the same design committed to the default device recompiled the
+    whole gradient (57 s on the reference case, issue 32). A design is small, so the copy through the
+    host costs nothing next to a compilation. An array on another device, or split across devices,
+    stays as it is: there the program must run where the data are.
+    """
+    if is_traced(x) or not getattr(x, "committed", False) or len(x.devices()) != 1:
+        return x
+    plain = jnp.asarray(np.asarray(x))
+    return plain if plain.devices() == x.devices() else x
 
 
 # Round-off slack at the design bounds: filtered densities are convex combinations whose weights sum to
@@ -169,7 +202,22 @@ def output_file(path, option: str) -> Path:
     if not parent.is_dir():
         what = "is not a directory" if parent.exists() else "does not exist"
         raise ValueError(f"{option} {path}: the directory {parent} {what}; create it first or choose another path.")
+    _writable(parent, option, path)
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ValueError(f"{option} {path}: the file exists and cannot be written; choose another path.")
     return path
+
+
+def _writable(directory: Path, option: str, path: Path) -> None:
+    """Whether a file can be created in `directory`, by creating (and removing) one: `os.access` says yes on a
+    read-only file system for root, and for directories such as /sys. A `ValueError` before anything is
+    computed, instead of an `OSError` after (issue 32: `--json` onto a read-only file system)."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=directory, prefix=".ffr-jax-write-check-"):
+            pass
+    except OSError as err:
+        raise ValueError(f"{option} {path}: cannot create a file in {directory} ({err.strerror or err}); "
+                         "choose a directory you can write to.") from None
 
 
 def output_directory(path, option: str) -> Path:
