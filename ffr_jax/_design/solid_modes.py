@@ -87,8 +87,14 @@ def free_modes_sparse(model: SolidFEModel, youngs, densities, n_modes: int) -> t
     youngs, densities = np.asarray(youngs, dtype=np.float64), np.asarray(densities, dtype=np.float64)
     k, m = solid_csc_matrices(model, youngs, densities)
     scale = float(_stiffness_scale(model, jnp.asarray(youngs), jnp.asarray(densities)))
+    sigma = -1e-8 * scale
+    # SuperLU with a symmetric ordering and no pivoting (K - sigma M is positive definite), as the planar
+    # LanczosModes: SciPy's default (COLAMD, partial pivoting) fills a 3D factor several times more.
+    lu = spla.splu((k - sigma * m).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                   options={"SymmetricMode": True})
+    op = spla.LinearOperator(k.shape, matvec=lu.solve, dtype=float)
     v0 = np.random.default_rng(0).standard_normal(k.shape[0])
-    _, basis = spla.eigsh(k, n_modes + 6, M=m, sigma=-1e-8 * scale, which="LM", v0=v0, tol=0.0)
+    _, basis = spla.eigsh(k, n_modes + 6, M=m, sigma=sigma, OPinv=op, which="LM", v0=v0, tol=0.0)
     k_r, m_r = basis.T @ (k @ basis), basis.T @ (m @ basis)
     lam, rot = scipy.linalg.eigh(0.5 * (k_r + k_r.T), 0.5 * (m_r + m_r.T))
     if not (np.all(np.abs(lam[:6]) < 1e-10 * scale) and lam[6] > 1e-10 * scale):
