@@ -62,7 +62,7 @@ def split_body_coordinates(y_b, n_modes: int):
     return y_b[:2], y_b[2], y_b[3:]
 
 
-def body_coordinate_names(data: BodyData | SpatialBodyData) -> tuple[str, ...]:
+def body_coordinate_names(data: BodyData | SpatialBodyData | SpatialFlexibleBodyData) -> tuple[str, ...]:
     """Names of a body's coordinates: `R_x, R_y, theta, q_1, ...` (planar) or `R_x, R_y, R_z, e0..e3` (spatial)."""
     if isinstance(data, SpatialBodyData):
         return ("R_x", "R_y", "R_z", "e0", "e1", "e2", "e3")
@@ -71,7 +71,7 @@ def body_coordinate_names(data: BodyData | SpatialBodyData) -> tuple[str, ...]:
     return ("R_x", "R_y", "theta") + tuple(f"q_{k + 1}" for k in range(data.n_modes))
 
 
-def body_strain_energy(data: BodyData | SpatialBodyData, y_b):
+def body_strain_energy(data: BodyData | SpatialBodyData | SpatialFlexibleBodyData, y_b):
     """`1/2 q^T K_qq q` of a flexible body (zero for a rigid spatial body)."""
     if isinstance(data, SpatialBodyData):
         return jnp.zeros((), y_b.dtype)
@@ -81,7 +81,7 @@ def body_strain_energy(data: BodyData | SpatialBodyData, y_b):
     return 0.5 * q @ data.modal_stiffness @ q
 
 
-def body_mass_matrix(data: BodyData | SpatialBodyData, y_b):
+def body_mass_matrix(data: BodyData | SpatialBodyData | SpatialFlexibleBodyData, y_b):
     """Mass matrix `M_b(y_b)`, `(3 + n_q, 3 + n_q)` (planar) or `(7, 7)` (spatial), symmetric positive definite."""
     if isinstance(data, SpatialBodyData):
         return spatial.mass_matrix(data, y_b)
@@ -101,7 +101,7 @@ def body_mass_matrix(data: BodyData | SpatialBodyData, y_b):
     return jnp.concatenate([top, mid, bot], axis=0)
 
 
-def body_inertia_and_elastic_forces(data: BodyData | SpatialBodyData, y_b, z_b):
+def body_inertia_and_elastic_forces(data: BodyData | SpatialBodyData | SpatialFlexibleBodyData, y_b, z_b):
     """`-h_omega - h_e`: the quadratic-velocity (Coriolis, centrifugal, gyroscopic) and elastic forces."""
     if isinstance(data, SpatialBodyData):
         return spatial.inertia_forces(data, y_b, z_b)
@@ -117,7 +117,7 @@ def body_inertia_and_elastic_forces(data: BodyData | SpatialBodyData, y_b, z_b):
     return -jnp.concatenate([h_r, h_t[None], h_q])
 
 
-def marker_position(data: BodyData | SpatialBodyData, marker: int, y_b):
+def marker_position(data: BodyData | SpatialBodyData | SpatialFlexibleBodyData, marker: int, y_b):
     """Inertial position `r_P = R + A(theta) (c_P + Phi_P q)` of body marker `marker` (`R + A(p) u_P` spatial)."""
     if isinstance(data, SpatialBodyData):
         return spatial.marker_position(data, marker, y_b)
@@ -127,7 +127,7 @@ def marker_position(data: BodyData | SpatialBodyData, marker: int, y_b):
     return r + rotate(theta, data.marker_positions[marker] + _matvec(data.marker_modes[marker], q))
 
 
-def body_kinetic_energy(data: BodyData | SpatialBodyData, y_b, z_b):
+def body_kinetic_energy(data: BodyData | SpatialBodyData | SpatialFlexibleBodyData, y_b, z_b):
     """`T = 1/2 z_b^T M_b(y_b) z_b` from the body data (spatial: without the radial rate of `p`, which carries none)."""
     if isinstance(data, SpatialBodyData):
         return spatial.kinetic_energy(data, y_b, z_b)

@@ -88,6 +88,8 @@ def slider_crank(
     [`DesignMap`][] of the rod (`case.design` is its [`DesignedBody`][], see [`rod_body`][]).
     """
     # Every number is checked before anything is computed (the rod's modes compile first).
+    if not isinstance(spatial, bool):
+        raise ValueError(f"slider_crank(spatial=...) must be True or False, got {spatial!r}.")
     t1 = positive(t1, "slider_crank(t1=...)", "It is the end time in s.")
     t_ramp = positive(t_ramp, "slider_crank(t_ramp=...)", "It is the run-up time of the crank in s.")
     speed = number(speed, "slider_crank(speed=...)")
@@ -105,8 +107,6 @@ def slider_crank(
     rod = Body("rod", body.uniform_body_data())
     _check_eccentricity(eccentricity, float(rod.data.marker_positions[1, 0]))
     law = RampLaw(t_ramp=t_ramp, angle_at_ramp=speed * t_ramp / 2, speed=speed)
-    if not isinstance(spatial, bool):
-        raise ValueError(f"slider_crank(spatial=...) must be True or False, got {spatial!r}.")
     if spatial:
         return Case(problem=spatial_slider_crank_problem(body, eccentricity, law, t1),
                     design_map=DesignMap({"rod": body}))
