@@ -72,51 +72,40 @@ def velocity_mass_matrix(data: SpatialFlexibleBodyData, y_b):
     return jnp.concatenate([top, mid, bot], axis=0)
 
 
-def _velocity_map(data: SpatialFlexibleBodyData, h):
-    """`B = diag(I_3, 2 H, I_q)` `(6 + n_q, 7 + n_q)`."""
-    n_q = data.n_modes
-    eye3, eyeq = jnp.eye(3, dtype=h.dtype), jnp.eye(n_q, dtype=h.dtype)
-    z = lambda r, c: jnp.zeros((r, c), h.dtype)
-    return jnp.concatenate([
-        jnp.concatenate([eye3, z(3, 4), z(3, n_q)], axis=1),
-        jnp.concatenate([z(3, 3), 2.0 * h, z(3, n_q)], axis=1),
-        jnp.concatenate([z(n_q, 3), z(n_q, 4), eyeq], axis=1),
-    ], axis=0)
-
-
 def mass_matrix(data: SpatialFlexibleBodyData, y_b):
-    """`M_b(y_b) = B^T M_v B + k u u^T` `(7 + n_q, 7 + n_q)`, symmetric positive definite."""
-    _, h, u, _ = _frame(y_b)
-    b = _velocity_map(data, h)
-    reg = jnp.zeros((b.shape[1], b.shape[1]), h.dtype).at[3:7, 3:7].set(_regularisation(data) * jnp.outer(u, u))
-    return b.T @ velocity_mass_matrix(data, y_b) @ b + reg
-
-
-def _quadratic_velocity(data: SpatialFlexibleBodyData, a, omega, q, dq):
-    """`h_v` `(6 + n_q,)` of the module docstring."""
-    s, x, j, _ = _moments(data, q)
-    w = skew(omega)
-    h_r = a @ (w @ (w @ s) + 2.0 * (w @ (data.modal_moment @ dq)))
-    d = jnp.einsum("k,kba->ab", dq, x)
-    h_w = w @ (j @ omega) + 2.0 * (jnp.trace(d) * omega - d @ omega)
-    h_q = (jnp.einsum("a,kab,b->k", omega, x, omega) - (omega @ omega) * jnp.trace(x, axis1=1, axis2=2)
-           + 2.0 * jnp.einsum("a,j,jka->k", omega, dq, _axial(data.second_moment_qq)))
-    return jnp.concatenate([h_r, h_w, h_q])
+    """`M_b(y_b) = B^T M_v B + k u u^T` `(7 + n_q, 7 + n_q)`, symmetric positive definite (blocks written out:
+    `M_Rp = 2 M_Rw H`, `M_pp = 4 H^T J H + k u u^T`, `M_pq = 2 H^T M_wq`)."""
+    a, h, u, _ = _frame(y_b)
+    s, _, j, m_wq = _moments(data, y_b[7:])
+    m_rr = data.mass * jnp.eye(3, dtype=a.dtype)
+    m_rp = -2.0 * (a @ skew(s)) @ h
+    m_rq = a @ data.modal_moment
+    m_pp = 4.0 * h.T @ j @ h + _regularisation(data) * jnp.outer(u, u)
+    m_pq = 2.0 * h.T @ m_wq
+    top = jnp.concatenate([m_rr, m_rp, m_rq], axis=1)
+    mid = jnp.concatenate([m_rp.T, m_pp, m_pq], axis=1)
+    bot = jnp.concatenate([m_rq.T, m_pq.T, data.modal_mass], axis=1)
+    return jnp.concatenate([top, mid, bot], axis=0)
 
 
 def inertia_and_elastic_forces(data: SpatialFlexibleBodyData, y_b, z_b):
-    """`-h_omega - h_e` `(7 + n_q,)`: quadratic-velocity (centrifugal, Coriolis, gyroscopic) and elastic forces."""
+    """`-h_omega - h_e` `(7 + n_q,)`: quadratic-velocity (centrifugal, Coriolis, gyroscopic) and elastic forces,
+    `B^T (M_v Bdot z_b + h_v)` plus the radial and elastic terms (the products with `B` written out)."""
     a, h, u, n = _frame(y_b)
     q = y_b[7:]
     pdot, dq = z_b[3:7], z_b[7:]
     omega = 2.0 * h @ pdot
     rho = u @ pdot
-    b = _velocity_map(data, h)
-    bdot_z = jnp.concatenate([jnp.zeros(3, omega.dtype), -2.0 * (rho / n) * omega, jnp.zeros_like(dq)])
-    h_v = velocity_mass_matrix(data, y_b) @ bdot_z + _quadratic_velocity(data, a, omega, q, dq)
+    s, x, j, m_wq = _moments(data, q)
+    w = skew(omega)
+    turn = -2.0 * (rho / n) * omega  # Bdot z_b, the omega' part (the only one)
+    h_r = a @ (w @ (w @ s) + 2.0 * (w @ (data.modal_moment @ dq)) - skew(s) @ turn)
+    d = jnp.einsum("k,kba->ab", dq, x)
+    h_w = w @ (j @ omega) + 2.0 * (jnp.trace(d) * omega - d @ omega) + j @ turn
+    h_q = (jnp.einsum("a,kab,b->k", omega, x, omega) - (omega @ omega) * jnp.trace(x, axis1=1, axis2=2)
+           + 2.0 * jnp.einsum("a,j,jka->k", omega, dq, _axial(data.second_moment_qq)) + m_wq.T @ turn)
     radial = _regularisation(data) * u * ((pdot @ pdot - rho * rho) / n)
-    h_b = b.T @ h_v + jnp.concatenate([jnp.zeros(3, h.dtype), radial, data.modal_stiffness @ q])
-    return -h_b
+    return -jnp.concatenate([h_r, 2.0 * h.T @ h_w + radial, h_q + data.modal_stiffness @ q])
 
 
 def marker_position(data: SpatialFlexibleBodyData, marker: int, y_b):

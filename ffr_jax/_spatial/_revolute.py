@@ -82,6 +82,10 @@ class SpatialRevolute(AbstractConstraint):
         require_spatial(scene, (self.body_i, self.body_j), "SpatialRevolute")
         position = scene.marker_position(self.body_i, self.marker_i, y_r) - other_point(self, t, y_r, scene)
         a_i = marker_axis(scene, self.body_i, self.marker_i, self.axis_i, y_r)
-        b = self.normals_j if self.body_j < 0 else jnp.stack(
-            [marker_axis(scene, self.body_j, self.marker_j, n, y_r) for n in self.normals_j])
+        if self.body_j < 0:
+            b = self.normals_j
+        elif isinstance(scene.bodies[self.body_j].data, SpatialFlexibleBodyData):
+            b = jnp.stack([marker_axis(scene, self.body_j, self.marker_j, n, y_r) for n in self.normals_j])
+        else:
+            b = self.normals_j @ rotation_matrix(scene.body_coordinates(self.body_j, y_r)[3:7]).T
         return jnp.concatenate([position, b @ a_i])
