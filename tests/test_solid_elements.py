@@ -332,7 +332,8 @@ def test_cantilever_tip_deflection_h8_locks_h11_tet10_converge():
 def test_cantilever_tip_deflection_observed_orders():
     """n = 1, 2, 4: H8's locking error falls with order -> 2 (the parasitic shear energy ~ (dx / h)^2 is
     (dx)^2 at fixed h), H11's with order -> 2; both order estimates from the last two halvings
-    (measured 1.9 and 1.9); Tet10 faster (measured 3.3, then 2.3 at its error of 3e-5 ~ the end effects)."""
+    (measured 1.87 and 1.84, tending to 2: 1.97 and 2.03 from n = 4 to 8, benchmarks/RESULTS.md); Tet10 faster
+    (measured 3.4, then 4.6)."""
     errors = _relative_errors(3)
     _check_converges(errors)
     for name in ("H8", "H11"):

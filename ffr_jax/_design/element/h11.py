@@ -5,7 +5,8 @@ from typing import ClassVar
 import numpy as np
 
 from .h8 import check_hex_corners, gauss_points_2x2x2, hex_jacobian_samples, trilinear
-from .solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, isotropic, jacobians, nodal_mass, strain_matrix
+from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, isotropic, jacobians, nodal_mass,
+                         strain_matrix)
 
 
 class H11(AbstractSolidElement):

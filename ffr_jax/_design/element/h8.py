@@ -4,7 +4,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, isotropic, jacobian_determinants, jacobians, nodal_mass, strain_matrix
+from .solid_base import (DEGENERATE_RATIO, MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson,
+                         isotropic, jacobian_determinants, jacobians, nodal_mass, strain_matrix)
 
 # Corners of the reference cube in the VTK/meshio order: the face zeta = -1 counter-clockwise seen
 # from +zeta, then the face zeta = +1 above it.
@@ -41,8 +42,6 @@ def hex_jacobian_samples(xyz: np.ndarray) -> np.ndarray:
 def check_hex_corners(name: str, xyz: np.ndarray) -> None:
     """Refuse hexahedra with a vanishing corner Jacobian: coincident corners or collapsed edges
     (a wedge or pyramid written as a hexahedron), which the Gauss-point check lets through."""
-    from .solid_base import DEGENERATE_RATIO, _format_ids
-
     det = np.stack([jacobian_determinants(trilinear(*c)[1], xyz) for c in HEX_CORNERS], axis=1)
     size = np.sqrt(np.max(np.sum((xyz[:, :, None] - xyz[:, None]) ** 2, axis=-1), axis=(1, 2)))
     bad = np.flatnonzero(np.any(np.abs(det) <= DEGENERATE_RATIO * size[:, None] ** 3, axis=1))

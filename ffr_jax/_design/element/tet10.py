@@ -4,8 +4,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson, isotropic, jacobian_determinants, jacobians,
-                         nodal_mass, strain_matrix)
+from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson, isotropic,
+                         jacobian_determinants, jacobians, nodal_mass, strain_matrix)
 
 # Reference vertices (volume coordinates L1 = 1 - xi - eta - zeta, L2 = xi, L3 = eta, L4 = zeta) and
 # the edges of the mid-side nodes 4..9 in the VTK/meshio order.
@@ -93,7 +93,8 @@ class Tet10(AbstractSolidElement):
         bad = np.flatnonzero(quality < MIN_TET_QUALITY)
         if bad.size:
             raise ValueError(f"Tet10 elements {_format_ids(bad)} are badly shaped slivers (shape quality "
-                             f"{quality[bad].min():.3g} < {MIN_TET_QUALITY}, 1 for a regular tetrahedron); remesh them.")
+                             f"{quality[bad].min():.3g} < {MIN_TET_QUALITY}, 1 for a regular tetrahedron); "
+                             "remesh them.")
 
     def matrices(self, xyz: np.ndarray, poisson: float) -> tuple[np.ndarray, np.ndarray]:
         xyz = np.asarray(xyz, dtype=np.float64)
