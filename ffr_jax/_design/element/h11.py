@@ -5,8 +5,7 @@ from typing import ClassVar
 import numpy as np
 
 from .h8 import check_hex_corners, gauss_points_2x2x2, hex_jacobian_samples, trilinear
-from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, isotropic, jacobians, nodal_mass,
-                         strain_matrix)
+from .solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, isotropic_block, jacobians, nodal_mass
 
 
 class H11(AbstractSolidElement):
@@ -55,7 +54,7 @@ class H11(AbstractSolidElement):
 
     def matrices(self, xyz: np.ndarray, poisson: float) -> tuple[np.ndarray, np.ndarray]:
         xyz = np.asarray(xyz, dtype=np.float64)
-        d = isotropic(check_poisson(poisson))
+        poisson = check_poisson(poisson)
         self.check(xyz)
         m = xyz.shape[0]
         det0, inv0 = jacobians(trilinear(0.0, 0.0, 0.0)[1], xyz)
@@ -65,13 +64,12 @@ class H11(AbstractSolidElement):
         for (xi, eta, zeta), w in gauss_points_2x2x2():
             _, dn = trilinear(xi, eta, zeta)
             det, inv = jacobians(dn, xyz)
-            b_u = strain_matrix(inv @ dn)
+            grad_u = np.swapaxes(inv @ dn, 1, 2)
             dp = np.diag([-2.0 * xi, -2.0 * eta, -2.0 * zeta])  # d(1 - xi^2, ...) / d(xi, eta, zeta)
-            b_a = (det0 / det)[:, None, None] * strain_matrix(inv0 @ dp)
-            weight = (w * det)[:, None, None]
-            b_u_t, db_a = np.swapaxes(b_u, 1, 2), d @ b_a
-            k_uu += weight * (b_u_t @ (d @ b_u))
-            k_ua += weight * (b_u_t @ db_a)
-            k_aa += weight * (np.swapaxes(b_a, 1, 2) @ db_a)
+            grad_a = (det0 / det)[:, None, None] * np.swapaxes(inv0 @ dp, 1, 2)  # B_a's gradients
+            weight = w * det
+            k_uu += isotropic_block(grad_u, grad_u, weight, poisson)
+            k_ua += isotropic_block(grad_u, grad_a, weight, poisson)
+            k_aa += isotropic_block(grad_a, grad_a, weight, poisson)
         k = k_uu - k_ua @ np.linalg.solve(k_aa, np.swapaxes(k_ua, 1, 2))
         return 0.5 * (k + np.swapaxes(k, 1, 2)), nodal_mass(gauss_points_2x2x2(), xyz, trilinear)

@@ -5,7 +5,7 @@ from typing import ClassVar
 import numpy as np
 
 from .solid_base import (DEGENERATE_RATIO, MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson,
-                         isotropic, jacobian_determinants, jacobians, nodal_mass, strain_matrix)
+                         isotropic_block, jacobian_determinants, jacobians, nodal_mass)
 
 # Corners of the reference cube in the VTK/meshio order: the face zeta = -1 counter-clockwise seen
 # from +zeta, then the face zeta = +1 above it.
@@ -77,12 +77,12 @@ class H8(AbstractSolidElement):
 
     def matrices(self, xyz: np.ndarray, poisson: float) -> tuple[np.ndarray, np.ndarray]:
         xyz = np.asarray(xyz, dtype=np.float64)
-        d = isotropic(check_poisson(poisson))
+        poisson = check_poisson(poisson)
         self.check(xyz)
         k = np.zeros((xyz.shape[0], 24, 24))
         for point, w in gauss_points_2x2x2():
             _, dn = trilinear(*point)
             det, inv = jacobians(dn, xyz)
-            b = strain_matrix(inv @ dn)
-            k += (w * det)[:, None, None] * (np.swapaxes(b, 1, 2) @ (d @ b))
+            grad = np.swapaxes(inv @ dn, 1, 2)
+            k += isotropic_block(grad, grad, w * det, poisson)  # B^T D B det J w
         return 0.5 * (k + np.swapaxes(k, 1, 2)), nodal_mass(gauss_points_2x2x2(), xyz, trilinear)

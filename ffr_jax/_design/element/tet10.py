@@ -4,8 +4,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson, isotropic,
-                         jacobian_determinants, jacobians, nodal_mass, strain_matrix)
+from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson, isotropic_block,
+                         jacobian_determinants, jacobians, nodal_mass)
 
 # Reference vertices (volume coordinates L1 = 1 - xi - eta - zeta, L2 = xi, L3 = eta, L4 = zeta) and
 # the edges of the mid-side nodes 4..9 in the VTK/meshio order.
@@ -98,12 +98,12 @@ class Tet10(AbstractSolidElement):
 
     def matrices(self, xyz: np.ndarray, poisson: float) -> tuple[np.ndarray, np.ndarray]:
         xyz = np.asarray(xyz, dtype=np.float64)
-        d = isotropic(check_poisson(poisson))
+        poisson = check_poisson(poisson)
         self.check(xyz)
         k = np.zeros((xyz.shape[0], 30, 30))
         for point, w in gauss_points_4():
             _, dn = quadratic_tet(*point)
             det, inv = jacobians(dn, xyz)
-            b = strain_matrix(inv @ dn)
-            k += (w * det)[:, None, None] * (np.swapaxes(b, 1, 2) @ (d @ b))
+            grad = np.swapaxes(inv @ dn, 1, 2)
+            k += isotropic_block(grad, grad, w * det, poisson)  # B^T D B det J w
         return 0.5 * (k + np.swapaxes(k, 1, 2)), nodal_mass(conical_product_points(4), xyz, quadratic_tet)
