@@ -18,6 +18,7 @@ from ffr_jax._spatial._flexible_body_data import spatial_flexible_body_data
 # Both sides are the same sums in a different order (invariants first, then products, or node by node): they agree
 # to round-off, ~1e-15 relative per operation, times the few hundred operations of a 7 + 3 coordinate body.
 ROUNDOFF = 1e-12
+GRAVITY = jnp.array([0.3, -1.2, -9.81])
 
 
 def _body(seed=0, n_nodes=7, n_q=3):
@@ -58,6 +59,10 @@ def computed():
     lag = _lagrangian(masses, positions, modes, k, reg)
     y, z = _state()
 
+    def potential(y):  # -g . sum_n m_n r_n, node by node
+        return -GRAVITY @ jnp.sum(masses[:, None] * (y[:3] + (positions + modes @ y[7:]) @ rotation_matrix(y[3:7]).T),
+                                  axis=0)
+
     @jax.jit
     def run(data, y, z):
         m_ref = jax.hessian(lag, argnums=1)(y, z)
@@ -67,16 +72,20 @@ def computed():
         return {"mass matrix": (flex.mass_matrix(data, y), m_ref),
                 "forces": (flex.inertia_and_elastic_forces(data, y, z), f_ref),
                 "kinetic energy": (flex.kinetic_energy(data, y, z), t_ref),
-                "marker position": (flex.marker_position(data, 1, y), r_ref)}
+                "marker position": (flex.marker_position(data, 1, y), r_ref),
+                "gravity force": (flex.gravity_force(data, GRAVITY, y), -jax.grad(potential)(y)),
+                "gravity potential": (flex.gravity_potential(data, GRAVITY, y), potential(y))}
 
     return {name: (np.asarray(a), np.asarray(b)) for name, (a, b) in run(data, y, z).items()}
 
 
 @pytest.mark.slow  # ~3 s on the shared machine (compiling the oracle's second derivatives)
-@pytest.mark.parametrize("name", ["mass matrix", "forces", "kinetic energy", "marker position"])
+@pytest.mark.parametrize("name", ["mass matrix", "forces", "kinetic energy", "marker position", "gravity force",
+                                  "gravity potential"])
 def test_invariants_equal_node_by_node(computed, name):
     """Mass matrix, forces (`M zdot = f`, `f = dL/dy - (d^2 L / dz dy) z`, Lagrange's equations), kinetic
-    energy and marker position from the invariants equal the node-by-node oracle."""
+    energy, marker position and gravity (`Q = -dV/dy` of `V = -g . sum_n m_n r_n`) from the invariants equal the
+    node-by-node oracle."""
     got, want = computed[name]
     assert np.max(np.abs(got - want)) <= ROUNDOFF * np.max(np.abs(want)), name
     if name == "mass matrix":

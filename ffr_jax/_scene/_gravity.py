@@ -5,6 +5,8 @@ import jax.numpy as jnp
 from .._dynamics._body_dynamics import rotation
 from .._spatial import _rigid_body as spatial
 from .._spatial._body_data import SpatialBodyData
+from .._spatial import _flexible_body as spatial_flexible
+from .._spatial._flexible_body_data import SpatialFlexibleBodyData
 from ._base import AbstractForce
 from ._references import finite_vector
 
@@ -31,6 +33,9 @@ class Gravity(AbstractForce):
             if isinstance(body.data, SpatialBodyData):
                 parts.append(spatial.gravity_force(body.data, self._spatial(), y_b))
                 continue
+            if isinstance(body.data, SpatialFlexibleBodyData):
+                parts.append(spatial_flexible.gravity_force(body.data, self._spatial(), y_b))
+                continue
             a = rotation(y_b[2])
             s_u = body.data.first_moment + body.data.modal_moment @ y_b[3:]
             g = self.acceleration
@@ -45,6 +50,9 @@ class Gravity(AbstractForce):
             y_b = scene.body_coordinates(b, y_r)
             if isinstance(body.data, SpatialBodyData):
                 total = total + spatial.gravity_potential(body.data, self._spatial(), y_b)
+                continue
+            if isinstance(body.data, SpatialFlexibleBodyData):
+                total = total + spatial_flexible.gravity_potential(body.data, self._spatial(), y_b)
                 continue
             s_u = body.data.first_moment + body.data.modal_moment @ y_b[3:]
             total = total - self.acceleration @ (body.data.mass * y_b[:2] + rotation(y_b[2]) @ s_u)

@@ -143,3 +143,18 @@ def momenta(data: SpatialFlexibleBodyData, y_b, z_b):
     lin = data.mass * rdot + a @ (jnp.cross(omega, s) + data.modal_moment @ dq)
     ang = jnp.cross(r, lin) + jnp.cross(a @ s, rdot) + a @ (j @ omega + m_wq @ dq)
     return lin, ang
+
+
+def gravity_potential(data: SpatialFlexibleBodyData, acceleration, y_b):
+    """`V = -g . (m R + A s(q))` with `s(q) = s0 + S1 q`."""
+    s = data.first_moment + data.modal_moment @ y_b[7:]
+    return -acceleration @ (data.mass * y_b[:3] + rotation_matrix(y_b[3:7]) @ s)
+
+
+def gravity_force(data: SpatialFlexibleBodyData, acceleration, y_b):
+    """`Q = -dV/dy_b` of [`gravity_potential`][] `(7 + n_q,)`: `Q_R = m g`, `Q_p = 2 H^T s~ A^T g`,
+    `Q_q = S1^T A^T g` (written out, as for the rigid body, so the sensitivities see no nested derivative)."""
+    a, h, _, _ = _frame(y_b)
+    s = data.first_moment + data.modal_moment @ y_b[7:]
+    g_body = a.T @ acceleration
+    return jnp.concatenate([data.mass * acceleration, 2.0 * h.T @ (skew(s) @ g_body), data.modal_moment.T @ g_body])
