@@ -20,7 +20,8 @@ import scipy.sparse.linalg as spla
 import ffr_jax._design as fd
 from ffr_jax._design.element import H8, H11, Tet10
 from ffr_jax._design.solid_assembly import (SolidFEModel, solid_bcoo, solid_csc_matrices, solid_dense_matrix)
-from ffr_jax._design.solid_mesh import SolidMesh, box_grid, hex_to_tet10, read_solid_mesh, solid_from_meshio
+from ffr_jax._design.solid_mesh import (SolidMesh, box_grid, hex_to_tet10, read_solid_mesh, solid_cell_data,
+                                       solid_from_meshio)
 
 EPS = np.finfo(float).eps
 ROUNDOFF = 1e-12  # vanishing quantities relative to their scale: a few hundred eps (sums of element products)
@@ -64,9 +65,12 @@ def test_meshio_round_trip(tmp_path, cells):
     points = np.concatenate([mesh.nodes, [[9.0, 9.0, 9.0]]])
     boundary = ("quad", grid.elements[:, :4]) if cells == "hexahedron" else ("triangle", mesh.elements[:1, :3])
     path = tmp_path / "part.vtu"
-    meshio.write(path, meshio.Mesh(points, [(cells, mesh.elements), boundary]))
+    tags = np.arange(mesh.n_elements) % 3
+    meshio.write(path, meshio.Mesh(points, [(cells, mesh.elements), boundary],
+                                   cell_data={"region": [tags, np.zeros(len(boundary[1]), dtype=int)]}))
     back = read_solid_mesh(path)
     assert back == mesh and back.cell_type == cells
+    np.testing.assert_array_equal(solid_cell_data(meshio.read(path))["region"], tags)
 
 
 def test_meshio_bad_files_and_cells(tmp_path):

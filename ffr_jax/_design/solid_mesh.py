@@ -305,6 +305,19 @@ def solid_from_meshio(mesh, orientation: str = "refuse") -> SolidMesh:
     return SolidMesh.without_unused_nodes(points, elements, orientation=orientation)[0]
 
 
+def solid_cell_data(mesh) -> dict[str, np.ndarray]:
+    """The cell data of a `meshio.Mesh` on its solid cells, in the element order of [`solid_from_meshio`][].
+
+    E.g. `solid_cell_data(m)["gmsh:physical"]`: the physical volume of each element (passive regions,
+    materials), to be compared with the tags of the mesh's `field_data`.
+    """
+    solid = [b.type for b in mesh.cells if b.type in _SOLID_CELLS]
+    out = {}
+    for name, blocks in mesh.cell_data.items():
+        out[name] = np.concatenate([np.asarray(d) for d, b in zip(blocks, mesh.cells) if b.type in solid])
+    return out
+
+
 def read_solid_mesh(path, orientation: str = "refuse") -> SolidMesh:
     """Read a hexahedral or quadratic tetrahedral mesh from any file `meshio` reads (`.msh`, `.vtu`, `.inp`, ...).
 
