@@ -7,9 +7,9 @@ The 3D counterpart of [`FEModel`][] and its assembly: every global matrix has th
 one unit element matrix `A_e` per element (stiffness for `E = 1`, mass for `rho = 1`) scaled by
 an element value `v_e` (Young's modulus `E_e = x_e^p E0` or mass density `rho_e` from [`SIMP`][]),
 three degrees of freedom per node. [`SolidFEModel`][] holds the unit matrices as pytree leaves;
-[`SolidOperator`][] applies `A` without forming it, [`solid_bcoo`][] forms it as a JAX sparse
-BCOO matrix (differentiable in `v`), [`solid_dense_matrix`][] densely for small parts, and
-[`solid_csc_matrices`][] as SciPy CSC matrices on the host for sparse factorisations (one cached
+`SolidOperator` applies `A` without forming it, `solid_bcoo` forms it as a JAX sparse
+BCOO matrix (differentiable in `v`), `solid_dense_matrix` densely for small parts, and
+`solid_csc_matrices` as SciPy CSC matrices on the host for sparse factorisations (one cached
 sparsity pattern per mesh and set of removed degrees of freedom).
 
 Pass a `SolidFEModel` to compiled functions as an argument (not closed over), as for `FEModel`.
@@ -191,7 +191,7 @@ class SolidCscPattern:
 
 @functools.lru_cache(maxsize=8)
 def solid_csc_pattern(mesh: SolidMesh, removed: tuple[int, ...]) -> SolidCscPattern:
-    """The (cached) [`SolidCscPattern`][] of `mesh` without the degrees of freedom `removed`."""
+    """The (cached) `SolidCscPattern` of `mesh` without the degrees of freedom `removed`."""
     return SolidCscPattern(mesh, tuple(sorted(int(d) for d in removed)))
 
 

@@ -5,7 +5,7 @@ digest of its content), static configuration for `jax.jit`. One element type per
 hexahedra (for [`H8`][] or [`H11`][]) or 10-node tetrahedra ([`Tet10`][]), nodes in the VTK
 (meshio) order. Node `n` has the degrees of freedom `3 n`, `3 n + 1`, `3 n + 2` (`u_x, u_y, u_z`).
 
-[`box_grid`][] builds a structured hexahedral grid of a box with an element mask; [`solid_from_meshio`][]
+[`box_grid`][] builds a structured hexahedral grid of a box with an element mask; `solid_from_meshio`
 and [`read_solid_mesh`][] take any solid mesh `meshio` reads (gmsh, VTU, Abaqus, ...).
 """
 
@@ -191,7 +191,7 @@ class SolidGrid(SolidMesh):
     """The `nx x ny x nz` hexahedral grid of the box `[0, L] x [-W/2, W/2] x [-H/2, H/2]`, some cells masked out.
 
     Grid node `(i, j, k)` sits at `(i L / nx, -W/2 + j W / ny, -H/2 + k H / nz)`; grid cell
-    `(i, j, k)` has index `c = (k ny + j) nx + i` (the planar [`StructuredGrid`][] numbering, layer
+    `(i, j, k)` has index `c = (k ny + j) nx + i` (the planar `StructuredGrid` numbering, layer
     by layer). Only the cells with `mask[i, j, k]` true are elements, in increasing cell index;
     `cells[e]` is the cell index of element `e`, and only the nodes of some element are nodes of
     the mesh, renumbered in increasing grid index (`grid_nodes[n]` the grid index
@@ -240,7 +240,7 @@ class SolidGrid(SolidMesh):
 
 
 def box_grid(nx: int, ny: int, nz: int, length: float, width: float, height: float, mask=None) -> SolidGrid:
-    """The hexahedral [`SolidGrid`][] of the box `[0, L] x [-W/2, W/2] x [-H/2, H/2]`.
+    """The hexahedral `SolidGrid` of the box `[0, L] x [-W/2, W/2] x [-H/2, H/2]`.
 
     **Arguments:** cell counts `nx, ny, nz` (Python ints); box size `length, width, height`;
     `mask`: optional boolean `(nx, ny, nz)`, the cells that are elements (default all).
@@ -306,7 +306,7 @@ def solid_from_meshio(mesh, orientation: str = "refuse") -> SolidMesh:
 
 
 def solid_cell_data(mesh) -> dict[str, np.ndarray]:
-    """The cell data of a `meshio.Mesh` on its solid cells, in the element order of [`solid_from_meshio`][].
+    """The cell data of a `meshio.Mesh` on its solid cells, in the element order of `solid_from_meshio`.
 
     E.g. `solid_cell_data(m)["gmsh:physical"]`: the physical volume of each element (passive regions,
     materials), to be compared with the tags of the mesh's `field_data`.
@@ -321,7 +321,7 @@ def solid_cell_data(mesh) -> dict[str, np.ndarray]:
 def read_solid_mesh(path, orientation: str = "refuse") -> SolidMesh:
     """Read a hexahedral or quadratic tetrahedral mesh from any file `meshio` reads (`.msh`, `.vtu`, `.inp`, ...).
 
-    See [`solid_from_meshio`][] for what is supported.
+    See `solid_from_meshio` for what is supported.
     """
     import meshio
 

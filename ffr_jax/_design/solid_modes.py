@@ -5,7 +5,7 @@ three translations and three rotations of the mesh's nodes. The elastic modes ar
 eigenpairs of `K phi = lam M phi` on the M-orthogonal complement of `R`. Two solvers:
 
 - [`free_modes_dense`][]: JAX, differentiable (forward and reverse mode) through the planar
-  chain's [`retained_eigenpairs`][] (the subspace-stable derivative), on the deflated pencil
+  chain's `retained_eigenpairs` (the subspace-stable derivative), on the deflated pencil
   `K_s = K + sigma (M R)(R^T M R)^-1 (M R)^T`, which leaves the elastic eigenpairs unchanged
   (`R^T M phi = 0`) and moves the rigid ones to `sigma` above the retained range, so that no gap
   between a retained and a discarded eigenvalue is small. Cubic cost: small parts.

@@ -70,7 +70,7 @@ class H8(AbstractSolidElement):
         return np.array([4, 5, 6, 7, 0, 1, 2, 3])
 
     def check(self, xyz, min_ratio=MIN_JACOBIAN_RATIO, reorder_hint=""):
-        """The Jacobian checks of [`check_jacobians`][] at the Gauss points and the centre, and no vanishing
+        """The Jacobian checks of `check_jacobians` at the Gauss points and the centre, and no vanishing
         corner Jacobian."""
         super().check(xyz, min_ratio, reorder_hint)
         check_hex_corners(type(self).__name__, np.asarray(xyz, dtype=np.float64))

@@ -39,7 +39,7 @@ def strain_matrix(dxyz: np.ndarray) -> np.ndarray:
     """Strain–displacement matrix `B` `(m, 6, 3k)` from Cartesian derivatives `dxyz` `(m, 3, k)`.
 
     Degrees of freedom `(u_x, u_y, u_z)` interleaved per function; strains in the Voigt order of
-    [`isotropic`][].
+    `isotropic`.
     """
     m, _, k = dxyz.shape
     b = np.zeros((m, 6, 3 * k))
@@ -54,12 +54,12 @@ def strain_matrix(dxyz: np.ndarray) -> np.ndarray:
 def isotropic_block(grad_a: np.ndarray, grad_b: np.ndarray, weight: np.ndarray, poisson: float) -> np.ndarray:
     """`sum` of `B_a^T D B_b w` for one quadrature point, formed from the gradients, `(m, 3 k_a, 3 k_b)`.
 
-    For the isotropic `D` of [`isotropic`][] (`E = 1`: Lame constants `lambda = nu / ((1 + nu)(1 - 2 nu))`,
+    For the isotropic `D` of `isotropic` (`E = 1`: Lame constants `lambda = nu / ((1 + nu)(1 - 2 nu))`,
     `mu = 1 / (2 (1 + nu))`) the block of functions `a`, `b` and components `i`, `j` is
 
     `w (lambda g_a,i g_b,j + mu g_a,j g_b,i + mu delta_ij g_a . g_b)`,
 
-    the same numbers as `B^T D B` with the strain matrix of [`strain_matrix`][], without its zeros.
+    the same numbers as `B^T D B` with the strain matrix of `strain_matrix`, without its zeros.
     `grad_a` `(m, k_a, 3)`, `grad_b` `(m, k_b, 3)` Cartesian gradients; `weight` `(m,)`.
     """
     lam = poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson))
@@ -186,7 +186,7 @@ class AbstractSolidElement(eqx.Module):
         """
 
     def check(self, xyz: np.ndarray, min_ratio: float = MIN_JACOBIAN_RATIO, reorder_hint: str = "") -> None:
-        """Refuse inverted, degenerate and badly shaped elements (see [`check_jacobians`][])."""
+        """Refuse inverted, degenerate and badly shaped elements (see `check_jacobians`)."""
         xyz = np.asarray(xyz, dtype=np.float64)
         if xyz.ndim != 3 or xyz.shape[1:] != (self.n_nodes, 3):
             raise ValueError(f"{type(self).__name__} needs node coordinates of shape (m, {self.n_nodes}, 3), "

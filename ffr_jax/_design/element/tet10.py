@@ -82,7 +82,7 @@ class Tet10(AbstractSolidElement):
         return np.array([0, 2, 1, 3, 6, 5, 4, 7, 9, 8])
 
     def check(self, xyz: np.ndarray, min_ratio: float = MIN_JACOBIAN_RATIO, reorder_hint: str = "") -> None:
-        """The Jacobian checks of [`check_jacobians`][], and slivers: shape quality
+        """The Jacobian checks of `check_jacobians`, and slivers: shape quality
         `6 sqrt(2) V / l_max^3` of the vertex tetrahedron below `MIN_TET_QUALITY` (1e-3)."""
         super().check(xyz, min_ratio, reorder_hint)
         v = np.asarray(xyz, dtype=np.float64)[:, :4]
