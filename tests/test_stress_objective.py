@@ -123,7 +123,8 @@ def test_a_joint_not_in_the_scene_is_refused(rod):
 def test_stress_measure_gradient_adjoint_autodiff_fd(rod):
     """d sigma_PN / dx of the relaxed 8-norm stress by the adjoint, by autodiff and, along one direction, by
     central differences of psi. The limit is the design's own relaxed peak, so psi / T is of order one and
-    the adjoint's absolute tolerances (1e-10 on adjoint variables of the size of psi) are not the limit."""
+    the adjoint's absolute tolerances (1e-10 on adjoint variables of the size of psi) are not the limit.
+    (91 s on two loaded cores.)"""
     case, x = rod
     traj = fj.simulate(case, x, ts=jnp.linspace(0.0, 0.1, 21))
     limit = float(jnp.max(peak_von_mises(case, traj, x, relaxation=0.5)))
@@ -143,7 +144,8 @@ def test_stress_measure_gradient_adjoint_autodiff_fd(rod):
 @pytest.mark.slow
 def test_angle_driver_torque_gradient_adjoint_autodiff_fd():
     """`int tau^2 dt` of the crank's angle driver on the crank-rocker with the family coupler: d psi / dx by
-    the adjoint, by autodiff and, along one direction, by central differences (bounds above)."""
+    the adjoint, by autodiff and, along one direction, by central differences (bounds above). Expensive: the
+    multipliers hold nested forward derivatives (19 min on two cores loaded by other jobs, 1 s of it running)."""
     case = fj.cases.four_bar(4, 2, 2, 0.1)
     case = case.with_objective(fj.JointLoad(case, "AngleDriver(crank)", "torque", 2))
     x = case.initial_design(0.5).at[0].set(0.3)
@@ -169,3 +171,37 @@ def test_an_unreachable_stress_limit_is_reported_by_the_optimizer(rod):
     with pytest.warns(fj.ConstraintViolationWarning, match="stress"):
         result = fj.optimize(fj.make_objective(case), x, fj.MMA(), [constraint], iterations=2, progress=False)
     assert not result.feasible and result.constraints[0] > 100.0
+
+
+# --- output: the VTU series and the picture --------------------------------------------------------------
+@pytest.mark.slow
+def test_vtu_series_carries_the_von_mises_stress(rod, tmp_path):
+    """Each frame's `von_mises` cell data is the element von Mises stress of that frame's modal coordinates
+    (the same program: 1e-12), `peak_von_mises` its maximum over the frames."""
+    import meshio
+
+    from ffr_jax._outputs._peak_stress import element_von_mises
+
+    case, x = rod
+    pvd = fj.write_vtu_series(tmp_path / "motion.pvd", case, x, frames=3)
+    frames = [meshio.read(f) for f in sorted((tmp_path / "motion_vtu").glob("*.vtu"))]
+    _, _, y_r = fj.body_motion(case, x, np.linspace(case.t0, case.t1, 3))  # the motion the series draws
+    expected = np.asarray(element_von_mises(case.design, x, jnp.asarray(y_r[:, 3:])))
+    scale = expected.max()
+    for k, frame in enumerate(frames):
+        np.testing.assert_allclose(frame.cell_data["von_mises"][0], expected[k], rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(frame.cell_data["peak_von_mises"][0], expected.max(axis=0), rtol=0,
+                                   atol=1e-12 * scale)
+    assert pvd.exists() and scale > 0
+
+
+@pytest.mark.slow
+def test_plot_peak_stress(rod):
+    from ffr_jax._app._stress_plot import plot_peak_stress
+
+    case, _ = rod
+    peak = np.linspace(0.0, 2e6, case.mesh.n_elements)
+    ax = plot_peak_stress(case, peak, limit=1e6, title="peak")
+    assert len(ax.collections) == 2  # the field and the outlines of the elements over the limit
+    with pytest.raises(ValueError, match="one value per element"):
+        plot_peak_stress(case, peak[:-1])

@@ -21,10 +21,16 @@ def designed_body_index(case, where: str) -> int:
 
 
 @eqx.filter_jit
-def _peak(body, x, q, relaxation):
+def element_von_mises(body, x, q, relaxation=None):
+    """`max_g sigma_vm(t)_eg`: the von Mises stress of every element (the largest of its 2x2 Gauss points) at
+    each row of modal coordinates `q` `(n_t, n_q)` of the body `body` at design `x`, `(n_t, n_elements)`.
+
+    Macroscopic stresses ([`stress_modes`][]) with `relaxation=None`, else the relaxed stresses of
+    [`relaxed_stress_modes`][] with exponent `relaxation` (a static float).
+    """
     modes = stress_modes(body, x) if relaxation is None else relaxed_stress_modes(body, x, relaxation)
     sigma = jnp.einsum("egck,tk->tegc", modes, q)
-    return jnp.max(von_mises(sigma), axis=(0, 2))
+    return jnp.max(von_mises(sigma), axis=2)
 
 
 def peak_von_mises(case, trajectory, x, *, relaxation=None):
@@ -55,4 +61,5 @@ def peak_von_mises(case, trajectory, x, *, relaxation=None):
         raise ValueError(f"ffr_jax.peak_von_mises: relaxation is None or an exponent s >= 0, got {relaxation!r}.")
     o = scene.offsets[index]
     q = trajectory.positions[:, o + 3 : o + scene.sizes[index]]
-    return _peak(case.design, case.check(x), q, None if relaxation is None else float(relaxation))
+    return jnp.max(element_von_mises(case.design, case.check(x), q, None if relaxation is None else float(relaxation)),
+                   axis=0)
