@@ -117,11 +117,12 @@ def main() -> None:
                      f"{r['second_call_s']:.2f} |")
     lines += [
         "",
-        "The CLI compiles the design gradient as cacheable programs (`ffr_jax/_cacheable.py`): the FE stage with "
-        "its VJP (it may call SciPy through a host callback, so it is compiled in every process), and the scene "
-        "gradient (forward and backward solves) with equinox's checks traced in `nan` mode (no host callbacks: "
-        "JAX's persistent cache writes no entry for a program with them) and exported with `jax.export`, so a "
-        "second run neither traces nor compiles it. A failed check (NaN result) reruns with the checks raising.",
+        "The CLI, like `fj.value_and_grad(case, x)`, compiles the design gradient as cacheable programs "
+        "(`ffr_jax/_sensitivity/_cached.py`): the FE stage, the scene gradient (forward and backward solves) and the "
+        "FE stage's VJP, each with equinox's checks traced in `nan` mode (no host callbacks: JAX's persistent cache "
+        "writes no entry for a program with them) and exported with `jax.export`, so a second run neither traces "
+        "nor compiles them (an FE stage with SciPy callbacks is compiled in every process). A failed check (NaN "
+        "result) reruns with the checks raising.",
     ]
     write_section("Compiled once: plain calls and the CLI", "\n".join(lines))
 

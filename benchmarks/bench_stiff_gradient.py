@@ -138,7 +138,7 @@ def worker(spec):
                grad_rel_error=float(np.max(np.abs(grad - grad_ref)) / np.max(np.abs(grad_ref))),
                max_abs_grad=float(np.max(np.abs(grad_ref))))
     # One forward solve with the same solver and tolerances, for the ratio gradient / forward.
-    forward = eqx.filter_jit(lambda x: ffr_jax.simulate_case(case, x, rtol=rtol, atol=rtol * 1e-2, solver=solver,
+    forward = eqx.filter_jit(lambda x: ffr_jax.simulate(case, x, rtol=rtol, atol=rtol * 1e-2, solver=solver,
                                                               max_steps=spec["max_steps"]))
     traj = jax.block_until_ready(forward(x))
     fwd = []

@@ -13,6 +13,7 @@ there, and reach the caller as the package's [`DesignError`][] or [`SimulationEr
 message first ([`clean_errors`][]).
 """
 
+import time
 import warnings
 
 import diffrax
@@ -32,6 +33,7 @@ from ._sensitivity._base import AbstractSensitivity
 from ._sensitivity._direct import Direct
 from ._sensitivity._discrete_adjoint import DiscreteAdjoint
 from ._sensitivity._finite_differences import FiniteDifferences
+from ._sensitivity._cached import Uncacheable, cache_directory, cacheable, cached_value_and_grad, use_persistent_cache
 from ._sensitivity._check import GradientCheck, compare_with_differences
 from ._sensitivity._route import choose_route
 from ._dynamics._simulate import Trajectory, simulate as simulate_redundant, solve_minimal
@@ -143,6 +145,25 @@ _simulate_case = Program(_simulate_case_fn, "the simulation of a case")
 _value_and_grad_problem = Program(_value_and_grad_problem_fn, "the gradient of a problem")
 _value_and_grad_design = Program(_value_and_grad_design_fn, "the design gradient of a case")
 _value_and_grad_scene = Program(_value_and_grad_scene_fn, "the scene gradient of a problem")
+
+
+def _cached(case, x, method, rtol, atol, solver, max_steps, directory, detail):
+    """The design gradient through programs a later process loads instead of compiling (see
+    `_sensitivity/_cached.py`), or `None` where the program has no key that identifies it across
+    processes; says once per process what compiling or loading took."""
+    use_persistent_cache(directory)
+    start = time.perf_counter()
+    try:
+        (psi, grad), program, fresh = cached_value_and_grad(case, x, method, rtol=rtol, atol=atol, solver=solver,
+                                                            max_steps=max_steps, export_dir=directory / "programs")
+    except Uncacheable:
+        return None
+    if fresh:
+        how = ("loaded from the cache (compiled by an earlier process)" if program.loaded else
+               "compiled (first call for these shapes and settings; kept for later processes)")
+        logger.info("the design gradient of a case (%s) %s in %.1f s, with its first run %.1f s; cache: %s", detail,
+                    how, program.seconds, time.perf_counter() - start, directory)
+    return psi, grad
 
 
 def _route(target, method, solver, rtol, atol):
@@ -320,7 +341,11 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
                              "build a Case (problem + design map) to check a design gradient.")
         return _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps, detail=detail)
     x = _design(target, x, "value_and_grad")
-    psi, grad = _value_and_grad_design(target, x, method, rtol, atol, solver, max_steps, detail=detail)
+    directory = None if _checks.is_traced(x) or not cacheable(method) else cache_directory()
+    result = None if directory is None else _cached(target, x, method, rtol, atol, solver, max_steps, directory, detail)
+    if result is None:  # no cache, a traced design, finite differences or a scene without a stable key
+        result = _value_and_grad_design(target, x, method, rtol, atol, solver, max_steps, detail=detail)
+    psi, grad = result
     if not check and isinstance(method, Autodiff) and solver is None and not _checks.is_traced(x):
         # Autodiff through the explicit default solver at its stability limit can return the derivative of the
         # discrete solution with wrong signs (20 modes on the 12 x 2 rod: 530x off, benchmarks/RESULTS.md, "Every

@@ -25,7 +25,7 @@ import ffr_jax
 # dominated by solver noise.
 
 
-def variant(base: ffr_jax.FlexibleRodCase, other: ffr_jax.FlexibleRodCase) -> ffr_jax.FlexibleRodCase:
+def variant(base: ffr_jax.Case, other: ffr_jax.Case) -> ffr_jax.Case:
     """The array values of `other` (crank radius and law, initial state, templates) in the static
     structure of `base`, so that functions compiled for `base` run `other` without recompiling.
 

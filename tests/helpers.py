@@ -22,6 +22,10 @@ import numpy as np
 import ffr_jax
 
 # The family member every simulation-based check uses (the hard-case base of benchmarks/bench_hard_cases.py).
+# The one list of gradient methods (the names `fj.value_and_grad` takes) that every agreement test loops
+# over; tests/test_sensitivity.py checks that it is the package's whole list.
+GRADIENT_METHODS = ("adjoint", "autodiff", "backsolve", "direct", "discrete-adjoint", "fd")
+
 FAMILY = dict(nx=12, ny=2, n_modes=4, t1=0.15, t_ramp=0.05)
 
 # Forward tolerances of every gradient (the paper's), and of the finite-difference evaluations: two
@@ -35,7 +39,7 @@ TRACES: dict[str, int] = {}
 
 @functools.cache
 def small_case(nx: int = FAMILY["nx"], ny: int = FAMILY["ny"], n_modes: int = FAMILY["n_modes"],
-               t1: float = FAMILY["t1"], t_ramp: float = FAMILY["t_ramp"], **options) -> ffr_jax.FlexibleRodCase:
+               t1: float = FAMILY["t1"], t_ramp: float = FAMILY["t_ramp"], **options) -> ffr_jax.Case:
     """A member of the slider–crank family (REFERENCE_CASE §5), `FAMILY` by default, built once per process."""
     return ffr_jax.cases.slider_crank(nx, ny, n_modes, t1, t_ramp=t_ramp, **options)
 
@@ -69,7 +73,7 @@ def central_difference(f, h: float):
     return (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h)
 
 
-def uniform_design(case: ffr_jax.FlexibleRodCase, value: float = 0.5) -> jax.Array:
+def uniform_design(case: ffr_jax.Case, value: float = 0.5) -> jax.Array:
     """`case.initial_design(value)` as a strongly typed float64 array.
 
     `initial_design` returns a weakly typed array (`jnp.full` of a Python float), and `jax.jit`
@@ -78,7 +82,7 @@ def uniform_design(case: ffr_jax.FlexibleRodCase, value: float = 0.5) -> jax.Arr
     return jnp.asarray(np.asarray(case.initial_design(value)))
 
 
-def random_design(case: ffr_jax.FlexibleRodCase, seed: int, low: float = 0.2, high: float = 0.95) -> jax.Array:
+def random_design(case: ffr_jax.Case, seed: int, low: float = 0.2, high: float = 0.95) -> jax.Array:
     """A reproducible random design with every entry in `[low, high]`, inside `[x_min, 1]`.
 
     The default range stays clear of the SIMP switch at `x = 0.1`, where the density law has a

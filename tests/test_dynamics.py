@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import ffr_jax
+from ffr_jax._dynamics._model import MinimalModel
 from helpers import assert_close_relative, rotation
 
 
@@ -353,11 +354,11 @@ def test_rigid_slider_crank_matches_closed_form_kinematics():
     assert model.partition.n_independent == 0
     eps = float(scene.bodies[0].data.marker_positions[1, 0])
     length = float(scene.bodies[1].data.marker_positions[1, 0])
-    plain = ffr_jax.MinimalModel(partition=model.partition, reference_dependent=model.reference_dependent)
+    plain = MinimalModel(partition=model.partition, reference_dependent=model.reference_dependent)
 
     @jax.jit
     def step(y_d, t):
-        y_r = ffr_jax.MinimalModel(partition=plain.partition, reference_dependent=y_d).positions(t, jnp.zeros(0), scene)
+        y_r = MinimalModel(partition=plain.partition, reference_dependent=y_d).positions(t, jnp.zeros(0), scene)
         return y_r, y_r
 
     ts = jnp.linspace(0.0, case.t1, 201)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import ffr_jax
+from ffr_jax._dynamics._model import Partition
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +70,7 @@ def _slider_independent(phi: float = 1.2):
     the partition is singular there.
     """
     base = ffr_jax.cases.rigid_slider_crank(driven=False, eccentricity=ECC, length=LENGTH)
-    partition = ffr_jax.Partition(independent=(6,), dependent=(0, 1, 2, 3, 4, 5, 7, 8))
+    partition = Partition(independent=(6,), dependent=(0, 1, 2, 3, 4, 5, 7, 8))
     return ffr_jax.Problem(base.scene, base.t1, positions=_assembled(phi), partition=partition,
                            objective=ffr_jax.KineticEnergy())
 

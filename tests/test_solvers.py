@@ -122,5 +122,5 @@ def test_psi_of_a_small_slider_crank_agrees_with_dopri8():
     case = small_case(10, 2, 3, 0.2)
     x = case.initial_design(0.5)
     reference = float(ffr_jax.objective(case, x, rtol=1e-12, atol=1e-14))
-    trajectory = ffr_jax.simulate_case(case, x, rtol=1e-10, atol=1e-12, solver=Rodas5P())
+    trajectory = ffr_jax.simulate(case, x, rtol=1e-10, atol=1e-12, solver=Rodas5P())
     assert abs(float(trajectory.psi) - reference) < 1e-8 * abs(reference)

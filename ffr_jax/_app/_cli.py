@@ -11,6 +11,7 @@ import numpy as np
 
 from . import _cli_checks
 from .._dynamics._xla_flags import avoid_batched_lapack_deadlock
+from .._sensitivity._cached import CACHE_ENV, NO_CACHE_ENV, cache_directory, use_persistent_cache
 from ._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_case, make_case, scene_settings
 from ._cli_io import add_io_parsers
 from ._cli_optimize import add_optimize_parser
@@ -62,7 +63,7 @@ def _gradient(args) -> int:
     from .._sensitivity._backsolve import Backsolve
     from .._sensitivity._finite_differences import FiniteDifferences
     from .._api import sensitivity_method
-    from ._cacheable import cache_events, compile_value_and_grad
+    from .._sensitivity._cached import cache_events, compile_value_and_grad
 
     if args.atol is None:
         args.atol = scene_settings(args.case, {})["atol"]
@@ -189,39 +190,11 @@ def _add_gradient_parser(sub) -> None:
     p.set_defaults(func=_gradient)
 
 
-CACHE_ENV = "FFR_JAX_CACHE_DIR"
-NO_CACHE_ENV = "FFR_JAX_NO_CACHE"
-
-
-def cache_directory() -> Path | None:
-    """Where the CLI keeps JAX's persistent compilation cache, or `None` when it is turned off.
-
-    `$FFR_JAX_CACHE_DIR` if set, else `ffr_jax/xla` in the user's cache directory
-    (`$XDG_CACHE_HOME` or `~/.cache`); `FFR_JAX_NO_CACHE=1` (or `--no-cache`) turns it off.
-    """
-    if os.environ.get(NO_CACHE_ENV, "").strip() not in ("", "0"):
-        return None
-    if os.environ.get(CACHE_ENV):
-        return Path(os.environ[CACHE_ENV]).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "ffr_jax" / "xla"
-
-
 def _use_cache(enabled: bool) -> None:
     """Turn on JAX's persistent compilation cache, so that a second run of a command skips compilation."""
     directory = cache_directory() if enabled else None
-    if directory is None:
-        return
-    import jax
-
-    try:
-        directory.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        print(f"ffr-jax: warning: compilation cache off ({directory}: {err.strerror})", file=sys.stderr)
-        return
-    jax.config.update("jax_compilation_cache_dir", str(directory))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    if directory is not None:
+        use_persistent_cache(directory)
 
 
 def main(argv=None) -> int:
@@ -229,7 +202,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="ffr-jax", description=__doc__)
     parser.add_argument("--no-cache", action="store_true",
                         help=f"do not use the persistent compilation cache (also {NO_CACHE_ENV}=1; its directory: "
-                             f"${CACHE_ENV} or ~/.cache/ffr_jax/xla)")
+                             f"${CACHE_ENV} or ~/.cache/ffr_jax)")
     sub = parser.add_subparsers(dest="command", required=True)
     p_info = sub.add_parser("info", help="frequencies, mass and body data of a case's designed body")
     _add_case_arguments(p_info)

@@ -1,4 +1,11 @@
-"""A case's design gradient as programs that JAX's persistent compilation cache can keep.
+"""A case's design gradient as programs that a second process loads instead of tracing and compiling.
+
+`ffr_jax.value_and_grad(case, x)` (a concrete design) and `ffr-jax gradient` run it: the first call on
+a machine traces, exports and compiles the gradient and keeps it in the user's cache directory
+([`cache_directory`][]: `$FFR_JAX_CACHE_DIR`, else `ffr_jax` in `$XDG_CACHE_HOME` or `~/.cache`;
+`FFR_JAX_NO_CACHE=1` turns it off); a later process with the same case structure, shapes and settings
+loads the exported program and its XLA executable from there. Turning it on also turns on JAX's
+persistent compilation cache in `<cache directory>/xla`, unless the user has set one.
 
 JAX writes no persistent cache entry for a program with host callbacks, and a design gradient has
 two kinds of them: the runtime checks of equinox (`eqx.error_if`: Newton's method failing, a dead
@@ -14,22 +21,27 @@ as an exported program (`jax.export`: serialized StableHLO, keyed by the package
 versions, the static structure and the shapes) next to the XLA cache; a later process loads it
 instead of tracing.
 
-[`compile_value_and_grad`][] splits the computation at the scene, the way the gradient flows:
+The gradient is split at the scene, the way it flows, into three programs, each traced with equinox's
+checks in `nan` mode (no callbacks: the persistent cache keeps them) and exported (see above):
 
-1. the design map with its VJP (`x -> scene`: FE model, modal reduction, body data; it may call
-   SciPy, is compiled in every process, and is small);
+1. the FE stage, `x -> scene` (FE model, modal reduction, body data);
 2. the objective's gradient with respect to the scene (the forward and backward solves: nearly all
-   of the compile time), traced with equinox's checks in `nan` mode, which has no callbacks, so the
-   persistent cache keeps it, and it is exported (see above). A check that fails makes the result NaN; the same computation then
-   runs again through [`ffr_jax.value_and_grad_scene`][] with the checks raising, so the user sees
-   the package's own message, never a NaN;
+   of the compile time);
 3. the pull-back of the scene gradient to the design (the VJP of step 1).
+
+A check that fails makes a result NaN; that step then runs again with the checks raising, so the user
+sees the package's own message, never a NaN. A program that cannot be exported (e.g. an FE stage that
+calls SciPy's sparse eigensolver through a callback) is compiled in every process as before. Tracing in
+`nan` mode clears JAX's in-memory caches before and after (`_checks_as_nan`): once per machine, shapes
+and settings, other compiled functions of the process compile again on their next call.
 
 The numbers are those of `value_and_grad(case, x, method)`: the design gradient of every method
 but finite differences is the pull-back of its scene gradient (see `AbstractSensitivity`).
 """
 
 import contextlib
+import functools
+import logging
 import hashlib
 import importlib.metadata
 import os
@@ -38,14 +50,16 @@ import re
 import time
 import warnings
 from collections.abc import Callable
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from .._dynamics._case import Case
-from .._sensitivity._base import AbstractSensitivity
-from .._sensitivity._finite_differences import FiniteDifferences
+from .._errors import clean_errors
+from ._base import AbstractSensitivity
+from ._finite_differences import FiniteDifferences
 
 try:  # where equinox reads its error mode when a check is traced (equinox 0.11 - 0.13)
     import equinox._errors as _eqx_errors
@@ -78,11 +92,13 @@ def _finite(tree) -> bool:
     return all(bool(jnp.all(jnp.isfinite(leaf))) for leaf in leaves)
 
 
+@functools.cache
 def _source_digest() -> str:
     """A digest of the package's Python source and the versions of the libraries it traces."""
     h = hashlib.sha256()
-    for path in sorted(pathlib.Path(__file__).parent.rglob("*.py")):
-        h.update(str(path.relative_to(pathlib.Path(__file__).parent)).encode())
+    package = pathlib.Path(__file__).parents[1]
+    for path in sorted(package.rglob("*.py")):
+        h.update(str(path.relative_to(package)).encode())
         h.update(path.read_bytes())
     for name in ("jax", "jaxlib", "diffrax", "equinox", "lineax", "optimistix"):
         try:
@@ -108,95 +124,264 @@ def _program_key(static, treedef, leaves, options) -> str | None:
     return h.hexdigest()[:32]
 
 
-def _exported(key, directory, function, leaves):
-    """The exported program of `function(*leaves)` from `directory`, or traced, exported and saved."""
-    path = None if key is None or directory is None else pathlib.Path(directory) / f"{key}.jaxexport"
-    if path is not None and path.is_file():
-        try:
-            return jax.export.deserialize(bytearray(path.read_bytes())), True
-        except Exception:  # a corrupt or foreign file: trace again and overwrite it
-            pass
+CACHE_ENV = "FFR_JAX_CACHE_DIR"
+NO_CACHE_ENV = "FFR_JAX_NO_CACHE"
+
+
+def cache_directory() -> pathlib.Path | None:
+    """Where compiled programs are kept between processes, or `None` when that is turned off.
+
+    `$FFR_JAX_CACHE_DIR` if set, else `ffr_jax` in the user's cache directory (`$XDG_CACHE_HOME` or
+    `~/.cache`); `FFR_JAX_NO_CACHE=1` (or the command's `--no-cache`) turns it off. Exported programs go
+    to `programs/`, JAX's persistent compilation cache to `xla/` (unless the user has set its directory).
+    """
+    if os.environ.get(NO_CACHE_ENV, "").strip() not in ("", "0"):
+        return None
+    if os.environ.get(CACHE_ENV):
+        return pathlib.Path(os.environ[CACHE_ENV]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return pathlib.Path(base) / "ffr_jax"
+
+
+def use_persistent_cache(directory: pathlib.Path) -> bool:
+    """Turn on JAX's persistent compilation cache in `directory / "xla"` unless the user has set a cache
+    directory of their own (then theirs is used); whether a persistent cache is on."""
+    if jax.config.jax_compilation_cache_dir:
+        return True
+    try:
+        (directory / "xla").mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        warnings.warn(f"ffr_jax: compilation cache off ({directory}: {err.strerror}).", RuntimeWarning, stacklevel=3)
+        return False
+    jax.config.update("jax_compilation_cache_dir", str(directory / "xla"))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return True
+
+
+def cacheable(method: AbstractSensitivity) -> bool:
+    """Whether the design gradient of `method` splits into cacheable programs (not finite differences,
+    which differentiate the design directly, nor with an equinox whose error mode cannot be set)."""
+    return _HAS_ERROR_MODE and not isinstance(method, FiniteDifferences)
+
+
+def _scene_of(case, x):
+    """The scene of design `x` (the FE stage: FE model, modal reduction, body data)."""
+    return case.scene(case.check(x))
+
+
+def _pullback_of(case, x, g_scene):
+    """The derivative `g_scene` of the scene pulled back to the design (the FE stage's VJP)."""
+    return eqx.filter_vjp(case.scene, case.check(x))[1](g_scene)[0]
+
+
+def _scene_gradient_of(problem, scene, method, options):
+    """`(psi, d psi / d scene)` of the problem with `scene` (the forward and backward solves)."""
+    rtol, atol, solver, max_steps = options
+    return method.value_and_grad_scene(problem, scene, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps)
+
+
+@clean_errors
+@eqx.filter_jit
+def _raising(function, *args):
+    """`function(*args)` with the checks raising (after a check failed in a cacheable program)."""
+    return function(*args)
+
+
+def _is_array(leaf) -> bool:
+    """An array, or the shape of one (programs are keyed and exported from shapes)."""
+    return eqx.is_array(leaf) or isinstance(leaf, jax.ShapeDtypeStruct)
+
+
+def _inexact(leaf) -> bool:
+    return _is_array(leaf) and jnp.issubdtype(leaf.dtype, jnp.inexact)
+
+
+def _leaves(args) -> list:
+    return jax.tree_util.tree_leaves(eqx.filter(args, _is_array))
+
+
+class Uncacheable(Exception):
+    """A program has no key that identifies it across processes (e.g. a user's lambda in the scene)."""
+
+
+class _Program(eqx.Module):
+    """One compiled program with flat inputs (the array leaves of its arguments) and flat outputs."""
+
+    compiled: Callable = eqx.field(static=True)
+    loaded: bool = eqx.field(static=True)
+
+
+class _Gradient(eqx.Module):
+    """The three programs of a design gradient, and the structures that turn their flat outputs back into
+    a scene, a scene gradient and a design."""
+
+    scene: _Program
+    gradient: _Program
+    pullback: _Program
+    scene_static: Any = eqx.field(static=True)
+    scene_treedef: Any = eqx.field(static=True)
+    g_treedef: Any = eqx.field(static=True)
+    x_treedef: Any = eqx.field(static=True)
+    seconds: float = eqx.field(static=True)
+
+    @property
+    def loaded(self) -> bool:
+        """Whether the solves' program (nearly all of the compile time) came from the cache."""
+        return self.gradient.loaded
+
+    def __call__(self, case, x, method, options):
+        scene_leaves = self.scene.compiled(*_leaves((case, x)))
+        scene = eqx.combine(jax.tree_util.tree_unflatten(self.scene_treedef, scene_leaves), self.scene_static)
+        if not _finite(scene):  # a check of the FE stage failed (NaN in the cacheable program): raise it
+            _raising(_scene_of, case, x)
+        psi, *g_leaves = self.gradient.compiled(*_leaves((case.problem, scene, method, options)))
+        if not (_finite(psi) and _finite(g_leaves)):
+            _raising(_scene_gradient_of, case.problem, scene, method, options)
+            raise FloatingPointError("The objective or its gradient is not finite, and no check of the package "
+                                     "fired: rerun with FFR_JAX_NO_CACHE=1 and report the case.")
+        g_scene = jax.tree_util.tree_unflatten(self.g_treedef, list(g_leaves))
+        grad = jax.tree_util.tree_unflatten(self.x_treedef, list(self.pullback.compiled(*_leaves((case, x, g_scene)))))
+        if not _finite(grad):
+            _raising(_pullback_of, case, x, g_scene)
+        return psi, grad
+
+
+# Compiled gradients of this process by program keys (like the cache of a jitted function).
+_COMPILED: dict[tuple, _Gradient] = {}
+
+
+def _flat(function, static, treedef):
+    def flat(*leaves):
+        out = function(*eqx.combine(jax.tree_util.tree_unflatten(treedef, leaves), static))
+        return tuple(jax.tree_util.tree_leaves(eqx.filter(out, eqx.is_array)))
+
+    return flat
+
+
+def _gradient_programs(case, x, method, options, export_dir, need_key: bool = False,
+                       memo: bool = True) -> tuple[_Gradient, bool]:
+    """The three compiled programs of a design gradient (see the module docstring), and whether this call
+    made them (else they were compiled earlier in this process; `memo=False` loads or traces them anyway).
+    A program without a key (see `_program_key`) is traced and not kept: `Uncacheable` where `need_key`."""
+    shapes = eqx.filter_eval_shape(_scene_of, case, x)  # the scene by its shapes: nothing compiled yet
+    scene_dynamic, scene_static = eqx.partition(shapes, _is_array)
+    g_shapes = eqx.filter(shapes, _inexact)
+    x_shapes = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(jnp.shape(a), jnp.result_type(a)), x)
+    specs = {"scene": (_scene_of, (case, x)),
+             "gradient": (_scene_gradient_of, (case.problem, shapes, method, options)),
+             "pullback": (_pullback_of, (case, x, g_shapes))}
+    parts = {}
+    for name, (function, args) in specs.items():
+        dynamic, static = eqx.partition(args, _is_array)
+        leaves, treedef = jax.tree_util.tree_flatten(dynamic)
+        leaves = [jax.ShapeDtypeStruct(leaf.shape, leaf.dtype) for leaf in leaves]
+        key = _program_key((function.__name__, static), treedef, leaves, {})
+        if key is None and need_key:
+            raise Uncacheable
+        parts[name] = (_flat(function, static, treedef), leaves, key)
+    keys = tuple(key for _, _, key in parts.values())
+    if memo and None not in keys and keys in _COMPILED:
+        return _COMPILED[keys], False
+    paths = {name: _load_path(key, export_dir) for name, (_, _, key) in parts.items()}
+    cached = all(path is not None and path.is_file() for path in paths.values())
+    where = None if paths["gradient"] is None else paths["gradient"].parent
+    logging.getLogger("ffr_jax").info(
+        "getting the design gradient (first call in this process for these shapes and settings): %s...",
+        f"loading it from the cache ({where})" if cached else
+        "compiling it" + ("" if where is None else f" (kept in {where} for later processes)"))
+    start = time.perf_counter()
+    exported = {name: _load(paths[name]) for name in parts}
+    if any(e is None for e in exported.values()):
+        with _checks_as_nan():  # traced without host callbacks, so that XLA's persistent cache keeps them
+            for name, (flat, leaves, _) in parts.items():
+                if exported[name] is None:
+                    try:
+                        exported[name] = _export(paths[name], flat, leaves)
+                    except Exception as err:  # e.g. SciPy in the FE stage: compiled below with the checks raising
+                        logging.getLogger("ffr_jax").info("the %s program cannot be exported (%s: %s); it is "
+                                                          "compiled in every process", name, type(err).__name__, err)
+    programs = {}
+    for name, (flat, leaves, _) in parts.items():
+        if exported[name] is None:
+            programs[name] = _Program(jax.jit(flat).lower(*leaves).compile(), False)
+        else:  # XLA: from the persistent cache when it has the program
+            programs[name] = _Program(jax.jit(exported[name].call).lower(*leaves).compile(),
+                                      paths[name] is not None and exported[name] is not None and cached)
+    gradient = _Gradient(programs["scene"], programs["gradient"], programs["pullback"], scene_static,
+                         jax.tree_util.tree_structure(scene_dynamic), jax.tree_util.tree_structure(g_shapes),
+                         jax.tree_util.tree_structure(x_shapes), time.perf_counter() - start)
+    if None not in keys:
+        _COMPILED[keys] = gradient
+    return gradient, True
+
+
+def _load_path(key, export_dir):
+    """Where the exported program of `key` is kept, or `None`."""
+    return None if key is None or export_dir is None else pathlib.Path(export_dir) / f"{key}.jaxexport"
+
+
+def _load(path):
+    """The exported program at `path`, or `None` (none there, or a corrupt or foreign file)."""
+    if path is None or not path.is_file():
+        return None
+    try:
+        return jax.export.deserialize(bytearray(path.read_bytes()))
+    except Exception:  # traced again and overwritten
+        return None
+
+
+def _export(path, function, leaves):
     exported = jax.export.export(jax.jit(function))(*leaves)
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        partial = path.with_suffix(f".{os.getpid()}.partial")
-        partial.write_bytes(exported.serialize())
-        os.replace(partial, path)  # atomic: a killed run leaves no half-written program behind
-    return exported, False
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            partial = path.with_suffix(f".{os.getpid()}.partial")
+            partial.write_bytes(exported.serialize())
+            os.replace(partial, path)  # atomic: a killed run leaves no half-written program behind
+        except OSError as err:  # a full or read-only cache: the program still runs, only not kept
+            warnings.warn(f"ffr_jax: the compiled gradient could not be kept in {path.parent} ({err.strerror}).",
+                          RuntimeWarning, stacklevel=4)
+    return exported
+
+
+def cached_value_and_grad(case: Case, x, method: AbstractSensitivity, *, rtol: float, atol: float, solver=None,
+                          max_steps: int, export_dir=None) -> tuple[tuple, _Gradient, bool]:
+    """`((psi, grad), programs, fresh)` of a case at a concrete design `x` through the cacheable programs:
+    the FE stage, the scene gradient (the solves) and the FE stage's VJP, each loaded from `export_dir`
+    when a process kept it there, else traced with the checks in `nan` mode and exported there (a failed
+    check, a NaN, is rerun with the checks raising). `programs.loaded`: whether the solves' program came
+    from the cache; `programs.seconds`: what getting the programs took; `fresh`: whether this call got them
+    (else they were compiled earlier in this process). Raises `Uncacheable` where a program has no key
+    (then use the plain compiled path).
+    """
+    options = (rtol, atol, solver, max_steps)
+    programs, fresh = _gradient_programs(case, x, method, options, export_dir, need_key=True)
+    return programs(case, x, method, options), programs, fresh
 
 
 def compile_value_and_grad(case: Case, x, method: AbstractSensitivity, *, rtol: float = 1e-10,
-                           atol: float = 1e-12, max_steps: int = 200_000,
+                           atol: float = 1e-12, max_steps: int = 200_000, solver=None,
                            export_dir: str | os.PathLike | None = None) -> tuple[Callable, dict]:
-    """Compile `x -> (psi, grad)` of a case as cacheable programs (see the module's docstring).
+    """Compile `x -> (psi, grad)` of a case as cacheable programs (what `ffr-jax gradient` runs).
 
-    **Arguments:**
-
-    - `case`: a case (problem + design map); `x`: a design of it (fixes the shapes compiled for).
-    - `method`: a sensitivity method object; finite differences (which differentiate the design
-      directly) and an equinox without a settable error mode fall back to one program.
-    - `rtol`, `atol`, `max_steps`: as in [`ffr_jax.value_and_grad`][].
-    - `export_dir`: where exported programs are kept (`None`: trace every time).
-
-    **Returns:** `(fun, info)`: `fun(x)` gives `(psi, grad)` for designs of `x`'s shapes; `info`
-    holds `compile_s` (tracing, compiling or loading) and `exported_loaded` (whether the scene
-    gradient came from `export_dir` without tracing).
+    **Returns:** `(fun, info)`: `fun(x)` gives `(psi, grad)` for designs of `x`'s shapes; `info` holds
+    `compile_s` (tracing, compiling or loading) and `exported_loaded` (whether the solves' program came
+    from `export_dir` without tracing). Finite differences are compiled as one program (they
+    differentiate the design directly).
     """
-    from .._api import value_and_grad, value_and_grad_scene
-
-    options = dict(rtol=rtol, atol=atol, max_steps=max_steps)
     start = time.perf_counter()
-    if isinstance(method, FiniteDifferences) or not _HAS_ERROR_MODE:
-        compiled = jax.jit(lambda x: value_and_grad(case, x, method, **options)).lower(x).compile()
+    if not cacheable(method):
+        fd = jax.jit(lambda x: method.value_and_grad_design(case, case.check(x), rtol=rtol, atol=atol, solver=solver,
+                                                            max_steps=max_steps))
+        compiled = clean_errors(fd.lower(x).compile())
         return compiled, dict(compile_s=time.perf_counter() - start, exported_loaded=False)
-
-    problem = case.problem
-    design = eqx.filter_jit(lambda x: eqx.filter_vjp(case.scene, case.check(x)))
-    scene, pullback = design(x)  # (the FE stage runs once here: part of the compile time)
-    dynamic, static = eqx.partition((problem, scene, method), eqx.is_array)
-    leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-    wanted = [leaf for leaf in jax.tree_util.tree_leaves(scene) if eqx.is_inexact_array(leaf)]
-
-    def scene_gradient(*leaves):
-        problem, scene, method = eqx.combine(jax.tree_util.tree_unflatten(treedef, leaves), static)
-        psi, g_scene = method.value_and_grad_scene(problem, scene, rtol=rtol, atol=atol, solver=None,
-                                                   max_steps=max_steps)
-        # Flat outputs (a serializable structure): the derivatives of the scene's float arrays in
-        # the scene's leaf order.
-        return psi, tuple(jax.tree_util.tree_leaves(eqx.filter(g_scene, eqx.is_inexact_array)))
-
-    key = _program_key(static, treedef, leaves, options)
-    with _checks_as_nan():
-        try:
-            exported, loaded = _exported(key, export_dir, scene_gradient, leaves)
-        except Exception as err:  # a program jax.export cannot serialize: compiled as usual
-            warnings.warn(f"ffr_jax: the scene gradient could not be exported ({type(err).__name__}: {err}); "
-                          "it is traced in every process.", stacklevel=2)
-            exported, loaded = None, False
-        if exported is None:
-            gradient = jax.jit(scene_gradient).lower(*leaves).compile()
-        else:
-            shapes = [tuple(a.shape) for a in exported.out_avals[1:]]
-            if shapes != [leaf.shape for leaf in wanted]:
-                raise AssertionError(f"scene gradient leaves {shapes} differ from the scene's float arrays")
-            # XLA: from the persistent cache when it has the program
-            gradient = jax.jit(exported.call).lower(*leaves).compile()
-    pull = eqx.filter_jit(lambda pullback, g: pullback(g)[0])
-    g_like = eqx.filter(scene, eqx.is_inexact_array)
-    info = dict(compile_s=time.perf_counter() - start, exported_loaded=loaded)
+    options = (rtol, atol, solver, max_steps)
+    programs, _ = _gradient_programs(case, x, method, options, export_dir, memo=False)
+    info = dict(compile_s=time.perf_counter() - start, exported_loaded=programs.loaded)
 
     def fun(x):
-        scene, pullback = design(x)
-        dynamic = eqx.filter((problem, scene, method), eqx.is_array)
-        psi, g_leaves = gradient(*jax.tree_util.tree_leaves(dynamic))
-        if not (_finite(psi) and _finite(g_leaves)):
-            # A check failed inside the cacheable program: run it again with the checks raising.
-            value_and_grad_scene(problem, scene, method, **options)
-            raise FloatingPointError(
-                "The objective or its gradient is not finite, and no check of the package fired: "
-                "rerun with `ffr_jax.value_and_grad(case, x)` and report the case.")
-        g_scene = jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(g_like), list(g_leaves))
-        return psi, pull(pullback, g_scene)
+        return programs(case, x, method, options)
 
     return fun, info
 
