@@ -14,14 +14,15 @@ import pathlib
 
 import numpy as np
 
-from .element.h8 import H8
-from .element.solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids
-from .element.tet10 import Tet10
+from .element.h8 import H8, gauss_points_2x2x2, trilinear
+from .element.solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, jacobian_determinants
+from .element.tet10 import Tet10, conical_product_points, quadratic_tet
 
 # The element whose shape checks a mesh of each cell type runs (any element of that type would do:
 # the checks depend on the geometry only).
 CELL_TYPES = {"hexahedron": H8(), "tetra10": Tet10()}
 NODES_PER_CELL = {8: "hexahedron", 10: "tetra10"}
+_VOLUME_RULES = {"hexahedron": (gauss_points_2x2x2, trilinear), "tetra10": (conical_product_points, quadratic_tet)}
 # Nodes closer than this fraction of the shortest element edge count as duplicates.
 DUPLICATE_NODE_TOLERANCE = 1e-9
 
@@ -159,10 +160,11 @@ class SolidMesh:
         return self.nodes[self.elements]
 
     def element_volumes(self) -> np.ndarray:
-        """Element volumes `(n_elements,)` (the consistent mass of a unit density, summed over one component)."""
-        element = CELL_TYPES[self.cell_type]
-        _, m = element.matrices(self.element_coordinates(), 0.0)
-        return m[:, 0::3, 0::3].sum(axis=(1, 2))
+        """Element volumes `(n_elements,)`: `sum_g det J w_g` over the element's mass rule (exact for trilinear
+        hexahedra and straight tetrahedra)."""
+        rule, shape_functions = _VOLUME_RULES[self.cell_type]
+        xyz = self.element_coordinates()
+        return sum(w * jacobian_determinants(shape_functions(*p)[1], xyz) for p, w in rule())
 
     def check_element(self, element: AbstractSolidElement) -> None:
         """A `ValueError` unless `element` is made for this mesh's cell type."""
