@@ -5,7 +5,8 @@ from typing import ClassVar
 import numpy as np
 
 from .h8 import check_hex_corners, gauss_points_2x2x2, hex_jacobian_samples, trilinear
-from .solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, isotropic_block, jacobians, nodal_mass
+from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, check_poisson, gradient_moments, isotropic_block,
+                         jacobians, nodal_mass)
 
 
 class H11(AbstractSolidElement):
@@ -56,11 +57,8 @@ class H11(AbstractSolidElement):
         xyz = np.asarray(xyz, dtype=np.float64)
         poisson = check_poisson(poisson)
         self.check(xyz)
-        m = xyz.shape[0]
         det0, inv0 = jacobians(trilinear(0.0, 0.0, 0.0)[1], xyz)
-        k_uu = np.zeros((m, 24, 24))
-        k_ua = np.zeros((m, 24, 9))
-        k_aa = np.zeros((m, 9, 9))
+        a_uu = a_ua = a_aa = 0.0
         for (xi, eta, zeta), w in gauss_points_2x2x2():
             _, dn = trilinear(xi, eta, zeta)
             det, inv = jacobians(dn, xyz)
@@ -68,8 +66,9 @@ class H11(AbstractSolidElement):
             dp = np.diag([-2.0 * xi, -2.0 * eta, -2.0 * zeta])  # d(1 - xi^2, ...) / d(xi, eta, zeta)
             grad_a = (det0 / det)[:, None, None] * np.swapaxes(inv0 @ dp, 1, 2)  # B_a's gradients
             weight = w * det
-            k_uu += isotropic_block(grad_u, grad_u, weight, poisson)
-            k_ua += isotropic_block(grad_u, grad_a, weight, poisson)
-            k_aa += isotropic_block(grad_a, grad_a, weight, poisson)
+            a_uu = a_uu + gradient_moments(grad_u, grad_u, weight)
+            a_ua = a_ua + gradient_moments(grad_u, grad_a, weight)
+            a_aa = a_aa + gradient_moments(grad_a, grad_a, weight)
+        k_uu, k_ua, k_aa = (isotropic_block(a, poisson) for a in (a_uu, a_ua, a_aa))
         k = k_uu - k_ua @ np.linalg.solve(k_aa, np.swapaxes(k_ua, 1, 2))
         return 0.5 * (k + np.swapaxes(k, 1, 2)), nodal_mass(gauss_points_2x2x2(), xyz, trilinear)

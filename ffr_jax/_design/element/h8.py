@@ -5,7 +5,8 @@ from typing import ClassVar
 import numpy as np
 
 from .solid_base import (DEGENERATE_RATIO, MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson,
-                         isotropic_block, jacobian_determinants, jacobians, nodal_mass)
+                         gradient_moments, isotropic_block, jacobian_determinants, jacobians,
+                         nodal_mass)
 
 # Corners of the reference cube in the VTK/meshio order: the face zeta = -1 counter-clockwise seen
 # from +zeta, then the face zeta = +1 above it.
@@ -79,10 +80,11 @@ class H8(AbstractSolidElement):
         xyz = np.asarray(xyz, dtype=np.float64)
         poisson = check_poisson(poisson)
         self.check(xyz)
-        k = np.zeros((xyz.shape[0], 24, 24))
+        moments = 0.0
         for point, w in gauss_points_2x2x2():
             _, dn = trilinear(*point)
             det, inv = jacobians(dn, xyz)
             grad = np.swapaxes(inv @ dn, 1, 2)
-            k += isotropic_block(grad, grad, w * det, poisson)  # B^T D B det J w
+            moments = moments + gradient_moments(grad, grad, w * det)
+        k = isotropic_block(moments, poisson)  # sum_g B^T D B det J w_g
         return 0.5 * (k + np.swapaxes(k, 1, 2)), nodal_mass(gauss_points_2x2x2(), xyz, trilinear)

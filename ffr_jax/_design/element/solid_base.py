@@ -51,23 +51,27 @@ def strain_matrix(dxyz: np.ndarray) -> np.ndarray:
     return b
 
 
-def isotropic_block(grad_a: np.ndarray, grad_b: np.ndarray, weight: np.ndarray, poisson: float) -> np.ndarray:
-    """`sum` of `B_a^T D B_b w` for one quadrature point, formed from the gradients, `(m, 3 k_a, 3 k_b)`.
+def gradient_moments(grad_a: np.ndarray, grad_b: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """`w g_a,i g_b,j` of one quadrature point, `(m, k_a, 3, k_b, 3)`: summed over the points, the input of
+    [`isotropic_block`][]. `grad_a` `(m, k_a, 3)`, `grad_b` `(m, k_b, 3)` Cartesian gradients; `weight` `(m,)`."""
+    return (grad_a * weight[:, None, None])[:, :, :, None, None] * grad_b[:, None, None, :, :]
 
-    For the isotropic `D` of `isotropic` (`E = 1`: Lame constants `lambda = nu / ((1 + nu)(1 - 2 nu))`,
+
+def isotropic_block(moments: np.ndarray, poisson: float) -> np.ndarray:
+    """`sum_g B_a^T D B_b det J w_g` from the summed [`gradient_moments`][] `A`, `(m, 3 k_a, 3 k_b)`.
+
+    For the isotropic `D` of [`isotropic`][] (`E = 1`: Lame constants `lambda = nu / ((1 + nu)(1 - 2 nu))`,
     `mu = 1 / (2 (1 + nu))`) the block of functions `a`, `b` and components `i`, `j` is
 
-    `w (lambda g_a,i g_b,j + mu g_a,j g_b,i + mu delta_ij g_a . g_b)`,
+    `lambda A_aibj + mu A_ajbi + mu delta_ij sum_k A_akbk`,  `A_aibj = sum_g w_g g_a,i g_b,j`,
 
-    the same numbers as `B^T D B` with the strain matrix of `strain_matrix`, without its zeros.
-    `grad_a` `(m, k_a, 3)`, `grad_b` `(m, k_b, 3)` Cartesian gradients; `weight` `(m,)`.
+    the same numbers as `B^T D B` with the strain matrix of [`strain_matrix`][], without its zeros, and
+    linear in `A`, so the quadrature sum is taken once on `A`.
     """
     lam = poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson))
     mu = 0.5 / (1.0 + poisson)
-    ga, gb = grad_a * weight[:, None, None], grad_b
-    outer = ga[:, :, :, None, None] * gb[:, None, None, :, :]  # [m, a, i, b, j] = g_a,i g_b,j
-    block = lam * outer + mu * outer.transpose(0, 1, 4, 3, 2)
-    dot = mu * (ga @ np.swapaxes(gb, 1, 2))  # [m, a, b] = g_a . g_b
+    block = lam * moments + mu * moments.transpose(0, 1, 4, 3, 2)
+    dot = mu * np.einsum("makbk->mab", moments)
     for i in range(3):
         block[:, :, i, :, i] += dot
     m, ka, _, kb, _ = block.shape

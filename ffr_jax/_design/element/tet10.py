@@ -4,8 +4,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson, isotropic_block,
-                         jacobian_determinants, jacobians, nodal_mass)
+from .solid_base import (MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, check_poisson,
+                         gradient_moments, isotropic_block, jacobian_determinants, jacobians, nodal_mass)
 
 # Reference vertices (volume coordinates L1 = 1 - xi - eta - zeta, L2 = xi, L3 = eta, L4 = zeta) and
 # the edges of the mid-side nodes 4..9 in the VTK/meshio order.
@@ -100,10 +100,11 @@ class Tet10(AbstractSolidElement):
         xyz = np.asarray(xyz, dtype=np.float64)
         poisson = check_poisson(poisson)
         self.check(xyz)
-        k = np.zeros((xyz.shape[0], 30, 30))
+        moments = 0.0
         for point, w in gauss_points_4():
             _, dn = quadratic_tet(*point)
             det, inv = jacobians(dn, xyz)
             grad = np.swapaxes(inv @ dn, 1, 2)
-            k += isotropic_block(grad, grad, w * det, poisson)  # B^T D B det J w
+            moments = moments + gradient_moments(grad, grad, w * det)
+        k = isotropic_block(moments, poisson)  # sum_g B^T D B det J w_g
         return 0.5 * (k + np.swapaxes(k, 1, 2)), nodal_mass(conical_product_points(4), xyz, quadratic_tet)
