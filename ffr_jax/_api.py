@@ -406,7 +406,7 @@ def check_gradient(case: Case, x, grad, *, step: float = 1e-4, tolerance: float 
     - `random_directions`: extra random unit directions (two forward solves each); `seed`.
     - `rtol`, `atol`, `solver`, `max_steps`: the forward solves (as in [`objective`][]).
 
-    **Returns:** a [`GradientCheck`][]; `raise ValueError(check.message())` where `not check.trusted`
+    **Returns:** a `GradientCheck`; `raise ValueError(check.message())` where `not check.trusted`
     is what `value_and_grad(..., check=True)` does.
     """
     return compare_with_differences(

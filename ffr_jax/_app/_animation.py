@@ -94,7 +94,7 @@ def animate(case: Case, x_phys, path, *, frames: int = 60, fps: float = 20.0,
     - `rtol`, `atol`: tolerances of the simulation; `dpi`: resolution; `title`: first line of the
       caption.
 
-    **Returns:** an [`Animation`][].
+    **Returns:** an `Animation`.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.collections import PolyCollection

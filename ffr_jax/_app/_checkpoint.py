@@ -52,7 +52,7 @@ def save_checkpoint(path, checkpoint: Checkpoint) -> None:
 
     **Arguments:**
     - `path`: the checkpoint file (`.npz`); its directory must exist.
-    - `checkpoint`: the [`Checkpoint`][] to store.
+    - `checkpoint`: the `Checkpoint` to store.
     """
     path = Path(path)
     arrays = {
@@ -96,14 +96,14 @@ def _fsync_directory(directory: Path) -> None:
 
 
 def load_checkpoint(path, design_bounds: tuple[float, float] = (0.0, 1.0)) -> Checkpoint:
-    """Read a checkpoint written by [`save_checkpoint`][], checking that it is whole and its values sound.
+    """Read a checkpoint written by `save_checkpoint`, checking that it is whole and its values sound.
 
     **Arguments:**
     - `path`: the checkpoint file.
     - `design_bounds`: `(x_min, 1)` of the run's densities (default `(0, 1)`, which holds for every
       density design).
 
-    **Returns:** the [`Checkpoint`][].
+    **Returns:** the `Checkpoint`.
 
     **Raises:** [`CheckpointError`][] if the file is missing, unreadable, truncated, fails its
     CRC checks, lacks an entry, or holds values no run can have written: a design with NaN, inf

@@ -72,7 +72,7 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
     `directory/log.csv`, and every `checkpoint_every` steps (and after the last) the design, the
     optimizer state (for MMA: `x_{k-1}`, `x_{k-2}`, the asymptotes), the iteration and the history
     of the objective and of every constraint go to `directory/checkpoint.npz`, written atomically
-    ([`save_checkpoint`][]). `resume=True` continues from that checkpoint: the steps are
+    (`save_checkpoint`). `resume=True` continues from that checkpoint: the steps are
     deterministic, so the iterates are those of an uninterrupted run, bit for bit.
 
     At the end the constraints are evaluated at the final design; if one is violated by more than
@@ -121,7 +121,7 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
 
     **Returns:** an [`OptimizeResult`][].
 
-    A run owns its `directory` while it runs (an exclusive lock, [`RunLock`][]): a second run in the
+    A run owns its `directory` while it runs (an exclusive lock, `RunLock`): a second run in the
     same directory, started while the first runs, is refused at once.
 
     **Raises:** [`CheckpointError`][] when `resume` finds no readable checkpoint or one from

@@ -19,7 +19,7 @@ def density_outline(case: Case, x_phys, level: float = 0.5) -> list[np.ndarray]:
     contours). The outline runs along the mesh boundary (holes included) where material meets it;
     a fully solid part gives exactly its polygonal boundary.
 
-    On a [`StructuredGrid`][] (the rod) the element densities are values at the element centres,
+    On a `StructuredGrid` (the rod) the element densities are values at the element centres,
     extended to the boundary with the value of the adjacent element, and the region of their
     bilinear interpolation is traced (marching squares, `contourpy`): a solid rod gives exactly its
     rectangle, and a solid/void interface between two elements runs along their common edge, with

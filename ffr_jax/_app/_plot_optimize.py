@@ -43,7 +43,7 @@ def plot_designs(case: Case, x_phys: dict, *, title: str | None = None):
 
     **Arguments:**
     - `case`: a case with designed bodies, e.g. `ffr_jax.cases.four_bar_two_links` (rods on a
-      [`StructuredGrid`][] are drawn as images, bodies on any other mesh element by element with
+      `StructuredGrid` are drawn as images, bodies on any other mesh element by element with
       [`plot_field`][]); `x_phys`: `{name: (n_design_b,)}` physical densities.
     - `title`: optional figure title.
 

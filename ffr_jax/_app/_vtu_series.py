@@ -21,7 +21,7 @@ def write_vtu_series(path, case: Case, x_phys, *, frames: int = 60, rtol: float 
     Vector* with scale factor 1 draws the true deformed body, a larger factor amplifies it), and
     cell data `density` (physical density of every element, passive ones included) and `design`
     (1 on design elements, 0 on passive ones). The `.pvd` lists the files with their times, so
-    ParaView plays the motion. The motion is [`body_motion`][]'s: one simulation with output at
+    ParaView plays the motion. The motion is `body_motion`'s: one simulation with output at
     `linspace(t0, t1, frames)`. Works on any quadrilateral mesh.
 
     **Arguments:**

@@ -82,7 +82,7 @@ class DesignDomain(eqx.Module):
     def design_grid(self, values) -> np.ndarray:
         """A design-ordered vector `(n_design,)` as the rectangular block of grid elements it covers.
 
-        Needs a [`StructuredGrid`][] whose design elements fill whole rows and columns of a
+        Needs a `StructuredGrid` whose design elements fill whole rows and columns of a
         rectangle, e.g. the rod (`(ny, nx - 2)`: rows bottom to top, the solid end columns left out).
 
         **Returns:** `(rows, columns)` NumPy array.

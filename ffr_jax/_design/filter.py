@@ -32,7 +32,7 @@ class DensityFilter(eqx.Module):
     - `domain`: the [`DesignDomain`][], or a [`DesignedBody`][] (its domain; e.g. `case.design`).
     - `radius`: `r >= 0`, in units of `scale` (by default: in element sizes).
     - `scale`: `(sx, sy)`: distances are measured in `(dx / sx, dy / sy)`. Default: the element
-      size — `(L / nx, h / ny)` on a [`StructuredGrid`][] (the rod: `1.5` reaches the 8 nearest
+      size — `(L / nx, h / ny)` on a `StructuredGrid` (the rod: `1.5` reaches the 8 nearest
       elements, `r <= 1` gives `H = I`), and `(h, h)` with `h = sqrt(mean area)` of the design
       elements on any other mesh. `scale=(1, 1)` takes the radius in the mesh's length unit.
 

@@ -48,7 +48,7 @@ def plate_with_hole(side: float, radius: float, n: int, grading: float = 1.0) ->
     `S_k` (uniform along the side), `s_l = (l / n)^grading`. Halving `n` nests the meshes, so
     frequencies converge regularly (order 2 for Q4 and QM6) and extrapolate (Richardson).
 
-    **Returns:** a [`PlateWithHole`][] with `4 n^2` elements.
+    **Returns:** a `PlateWithHole` with `4 n^2` elements.
     """
     if not 0 < radius < side / 2:
         raise ValueError(f"radius must lie in (0, side/2), got {radius} for side {side}.")
@@ -103,7 +103,7 @@ def link_with_holes(length: float = 0.2, width: float = 0.05, hole_radius: float
     and its boundary is a mesh curve). Frontal-Delaunay for quads with Blossom full-quad
     recombination (every element a quadrilateral), target element size `mesh_size`.
 
-    **Returns:** a [`LinkMesh`][]; the rims' boundary nodes serve as interfaces and markers.
+    **Returns:** a `LinkMesh`; the rims' boundary nodes serve as interfaces and markers.
     """
     if not (hole_radius > 0 and rim_width > 0 and hole_radius + rim_width < width / 2):
         raise ValueError(f"Need 0 < hole_radius, 0 < rim_width and hole_radius + rim_width < width / 2, got "

@@ -342,7 +342,7 @@ class StructuredGrid(QuadMesh):
 
 
 def structured_grid(nx: int, ny: int, length: float, height: float) -> StructuredGrid:
-    """The `nx x ny` [`StructuredGrid`][] over `[0, L] x [-h/2, h/2]` (the numbering of the reference rod).
+    """The `nx x ny` `StructuredGrid` over `[0, L] x [-h/2, h/2]` (the numbering of the reference rod).
 
     **Returns:** a mesh with `(nx + 1)(ny + 1)` nodes and `nx ny` elements.
     """
@@ -362,7 +362,7 @@ def from_meshio(mesh) -> QuadMesh:
     polygons and volume cells (a clear error: recombine to linear quadrilaterals, e.g. gmsh
     `Mesh.RecombineAll = 1` and `Mesh.ElementOrder = 1`), and points off the plane `z = 0`.
 
-    Cell data of the quads (e.g. `gmsh:physical`) in the same element order: [`quad_cell_data`][].
+    Cell data of the quads (e.g. `gmsh:physical`) in the same element order: `quad_cell_data`.
     """
     points = np.asarray(mesh.points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] not in (2, 3):

@@ -27,7 +27,7 @@ class Problem(eqx.Module):
     arrays and the initial state `y0`, `z0`.
 
     **Fields:**
-    - `scene`: the [`Scene`][]; `model`: its partitioned [`MinimalModel`][].
+    - `scene`: the [`Scene`][]; `model`: its partitioned `MinimalModel`.
     - `objective`: the [`Objective`][] (integrand `F` and/or terminal term `G`).
     - `y0`, `z0`: `(f,)` independent initial positions and velocities.
     - `t0`, `t1`: the time span (static); `jump_ts`: times where the scene's laws switch pieces

@@ -14,7 +14,7 @@ from .._scene._scene import Scene
 
 
 class Trajectory(eqx.Module):
-    """Result of [`simulate`][].
+    """Result of [`simulate`][ffr_jax.simulate].
 
     - `ts`: `(n_t,)` output times; `ys`, `zs`: `(n_t, f)` minimal (independent) positions and
       velocities there.
@@ -112,7 +112,7 @@ def solve_minimal(
     Every array the vector field uses (those of the model, the scene and the terms) travels as
     the solve's `args`, and only arrays: diffrax's `BacksolveAdjoint` differentiates the vector
     field with respect to `args`, cannot close over traced arrays, and cannot carry empty tuples
-    such as `Scene.forces = ()` through its state. See [`simulate`][] for the rest.
+    such as `Scene.forces = ()` through its state. See [`simulate`][ffr_jax.simulate] for the rest.
     """
     solver = diffrax.Dopri8() if solver is None else solver
     adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint

@@ -27,7 +27,7 @@ class JointLoad(AbstractIntegrand):
 
     **Arguments:**
     - `target`: the [`Problem`][] or case whose scene the term measures (its coordinate partition is
-      kept), or that [`Partition`][] itself.
+      kept), or that `Partition` itself.
     - `joint`: the joint's name (see [`joint_names`][], e.g. `"CrankPin(rod)"`) or its index in
       `scene.constraints`.
     - `quantity`: `"torque"`, `"force"` or `"normal_force"`.

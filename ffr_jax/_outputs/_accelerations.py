@@ -31,5 +31,5 @@ def acceleration_terms(model: MinimalModel, t, y_r, z_r, scene: Scene):
 
 def redundant_accelerations(model: MinimalModel, t, y_r, z_r, scene: Scene):
     """`zdot_r`, `(n_r,)`: the accelerations of all redundant coordinates at a consistent state
-    `(t, y_r, z_r)` (see [`acceleration_terms`][])."""
+    `(t, y_r, z_r)` (see `acceleration_terms`)."""
     return acceleration_terms(model, t, y_r, z_r, scene)[0]

@@ -25,7 +25,7 @@ class AdjointTerms(eqx.Module):
 
     `R1` `(f,)`, `Rz` `(f,)` (the velocity counterpart of `R1`, zero for integrands of positions
     only), `S1`, `S2`, `T1`, `T2` `(f, f)`, `Mbar`, `Mbar_dot` `(f, f)`; the design terms `R2`,
-    `S3`, `T3` are never formed (see [`adjoint_products`][]).
+    `S3`, `T3` are never formed (see `adjoint_products`).
     """
 
     r1: jnp.ndarray
@@ -79,7 +79,7 @@ def adjoint_terms(problem: Problem, t, y, z, params) -> AdjointTerms:
     that depends on velocities (zero in the paper, whose integrands see positions only).
 
     The adjoint solve uses the products of these matrices with `(mu, nu)` instead
-    ([`adjoint_products`][], the same numbers without forming the matrices); this form states the
+    (`adjoint_products`, the same numbers without forming the matrices); this form states the
     paper's terms one by one and checks the products in the tests.
     """
     model = problem.model
@@ -213,7 +213,7 @@ def terminal_products(problem: Problem, t, y, z, params):
 
 
 QUADRATURE_BATCH = 2**17
-"""Default size of one vectorised quadrature batch, in nodes times parameters (see [`quadrature_chunk`][])."""
+"""Default size of one vectorised quadrature batch, in nodes times parameters (see `quadrature_chunk`)."""
 
 
 def quadrature_chunk(order: int, n_params: int, chunk: int | None = None) -> int:
@@ -246,7 +246,7 @@ def _quadrature_on_steps(problem, params, forward, backward: diffrax.DenseInterp
     Gauss–Legendre with `order` nodes on every accepted backward step, `(mu, Mbar nu)` from the
     step's own dense interpolant and `(y, z)` from the forward dense output. The steps are processed
     `chunk` at a time, every node of a chunk in one `jax.vmap`; steps past the last one are padded
-    (repeating the last step with weight zero). `chunk=None`: sized by [`quadrature_chunk`][].
+    (repeating the last step with weight zero). `chunk=None`: sized by `quadrature_chunk`.
     """
     n_p = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[0].size
     chunk = quadrature_chunk(order, n_p, chunk)
@@ -295,10 +295,10 @@ class Adjoint(AbstractSensitivity):
 
     solved for `(mu, w)` with `w = Mbar nu`, for which the second equation reads
     `w' = S2^T mu + T2^T nu - Rz^T` (no derivative of `Mbar` needed), and with the products formed
-    by reverse mode ([`adjoint_products`][]). `Rz` is the derivative of the integrand `F` with
+    by reverse mode (`adjoint_products`). `Rz` is the derivative of the integrand `F` with
     respect to the independent velocities (zero for the paper's integrands of positions). The
     end values are `mu(t1) = dG/dy`, `w(t1) = dG/dz` for a terminal term `G(t1, y_r, z_r, p)`
-    (zero without one, as in eq. 43; [`terminal_products`][]).
+    (zero without one, as in eq. 43; `terminal_products`).
 
     The gradient (paper eq. 44 plus the terminal term)
     `grad psi = int_{t0}^{t1} (R2 - mu^T S3 - nu^T T3) dt + dG/dp` lives in the parameter space
@@ -335,10 +335,10 @@ class Adjoint(AbstractSensitivity):
       degree 5 on each step), or `None`.
     - `chunk`: backward steps per vectorised quadrature batch (default `None`: sized by the
       number of parameters so that a batch stays near `2^17` node-parameter entries,
-      [`quadrature_chunk`][]; 241 steps at 6 modes, 8 at 40).
+      `quadrature_chunk`; 241 steps at 6 modes, 8 at 40).
     - `products`: how the right-hand side of eq. 43 is formed: `"reverse"` (default: one reverse
-      pass, [`adjoint_products`][]) or `"matrices"` (the paper's matrices `R1, Rz, S1, S2, T1, T2`
-      from `jax.jacfwd`, [`adjoint_terms`][], multiplied out; the same numbers, about 6x the cost
+      pass, `adjoint_products`) or `"matrices"` (the paper's matrices `R1, Rz, S1, S2, T1, T2`
+      from `jax.jacfwd`, `adjoint_terms`, multiplied out; the same numbers, about 6x the cost
       per evaluation on the reference case). The design term is one VJP in both.
     - `max_steps`: step budget of the backward solve, whose dense output holds that many steps
       (default: the forward budget; on the forward grid the backward solve takes the forward's steps).

@@ -60,7 +60,7 @@ class AbstractSensitivity(eqx.Module):
     @abc.abstractmethod
     def value_and_grad_problem(self, problem: Problem, *, rtol: float, atol: float,
                                solver: diffrax.AbstractSolver | None, max_steps: int):
-        """`(psi, dpsi/dproblem)`, the gradient a pytree like `problem` (see [`problem_gradient`][])."""
+        """`(psi, dpsi/dproblem)`, the gradient a pytree like `problem` (see `problem_gradient`)."""
 
     def value_and_grad_scene(self, problem: Problem, scene, *, rtol, atol, solver, max_steps):
         """`(psi, dpsi/dp)` for the problem with parameters `scene`: a pytree like `scene`."""

@@ -11,7 +11,7 @@ from .interface import ReductionLayout
 
 
 class AbstractModalSolver(eqx.Module):
-    """Computes the eigenmodes and static modes of a [`ReductionLayout`][] for one design.
+    """Computes the eigenmodes and static modes of a `ReductionLayout` for one design.
 
     Implementations: [`DenseModes`][] (dense matrices, LAPACK, forward and reverse mode),
     [`LanczosModes`][] (sparse, shift-invert Lanczos on the host, reverse mode), and

@@ -70,7 +70,7 @@ def _retained_eigenpairs_jvp(n_modes, primals, tangents):
 class DenseModes(AbstractModalSolver):
     """Dense `K`, `M` and a full eigen-solution of the interior problem (small meshes).
 
-    Eigenmodes by [`retained_eigenpairs`][] on `(K_II, M_II)`; static modes
+    Eigenmodes by `retained_eigenpairs` on `(K_II, M_II)`; static modes
     `Psi_I = -K_II^-1 K_IB U_B` by a dense solve. Differentiable in forward and reverse mode;
     cost cubic in the number of degrees of freedom (use [`LanczosModes`][] beyond a few thousand).
     """
