@@ -80,7 +80,7 @@ def filtered_objective(fun: Callable,
     return fun_of_projected_design
 
 
-def make_objective(case: Case | OperatingConditions, method: str | AbstractSensitivity = "adjoint",
+def make_objective(case: Case | OperatingConditions, method: str | AbstractSensitivity | None = None,
                    filter: DensityFilter | StackedFilter | dict[str, DensityFilter] | None = None,
                    projection: HeavisideProjection | None = None, **kwargs) -> Callable:
     """The objective of a case as a pure function `x -> (psi, grad psi)` for an optax loop.
@@ -93,8 +93,11 @@ def make_objective(case: Case | OperatingConditions, method: str | AbstractSensi
     **Arguments:**
     - `case`: e.g. `ffr_jax.cases.slider_crank(nx=12, ny=2, n_modes=3, t1=0.2)`, or
       [`OperatingConditions`][] (several crank speeds or loads as one batched solve).
-    - `method`: sensitivity method of `ffr_jax.value_and_grad`: `"adjoint"` (default),
-      `"autodiff"`, `"backsolve"`, `"direct"`, `"fd"`, or a configured method object.
+    - `method`: sensitivity method of `ffr_jax.value_and_grad`: `"adjoint"`, `"autodiff"`,
+      `"backsolve"`, `"direct"`, `"discrete-adjoint"`, `"fd"`, or a configured method object; default
+      (with no `solver` either): the route [`choose_route`][ffr_jax.choose_route] picks for the case, as
+      `ffr_jax.value_and_grad` does (the discrete adjoint of Rodas5P where an explicit solver would sit at
+      its stability limit, e.g. the reference case; else the paper's adjoint with Dopri8).
     - `filter`: a [`DensityFilter`][], a dict of them by body (for a dict design), or `None`.
     - `projection`: a [`HeavisideProjection`][] after the filter, or `None`; with one the
       function is `fun(x, beta)`, `x_phys = P_beta(H x)`.
@@ -108,7 +111,12 @@ def make_objective(case: Case | OperatingConditions, method: str | AbstractSensi
     psi, grad = jax.jit(fun)(case.initial_design(0.5))
     ```
     """
-    method = _api.sensitivity_method(method)  # an unknown name fails here, not at the first step
+    base = case.case if isinstance(case, OperatingConditions) else case
+    # The route resolved once here (method, solver, tolerances), so that every step runs the same settings and
+    # the checkpoints' fingerprint names them; an unknown method name fails here, not at the first step.
+    method, solver, rtol, atol, _ = _api._route(base, method, kwargs.pop("solver", None), kwargs.pop("rtol", None),
+                                                kwargs.pop("atol", None))
+    kwargs.update(solver=solver, rtol=rtol, atol=atol)
     if isinstance(case, OperatingConditions):
         def fun(x):
             return case.value_and_grad(x, method, **kwargs)[:2]
