@@ -91,7 +91,8 @@ def _check_ts(ts) -> None:
 
 
 def _check_options(where: str, rtol, atol, max_steps) -> None:
-    """The solve options of a public function, before anything is traced."""
+    """The solve options of a public function, before anything is traced (and float64 on: issue 32)."""
+    _checks.float64_on(where)
     _checks.tolerances(rtol, atol, where)
     _checks.max_steps(max_steps, where)
 
@@ -329,6 +330,7 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
     psi, grad = fj.value_and_grad(case, case.initial_design(0.5))
     ```
     """
+    _checks.float64_on("ffr_jax.value_and_grad")  # before the route, which computes frequencies
     _check_target(target)
     if isinstance(target, Problem) and isinstance(x, (str, AbstractSensitivity)):
         x, method = None, x  # value_and_grad(problem, "autodiff")

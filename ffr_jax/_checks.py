@@ -132,14 +132,14 @@ def design_array(x, of_body: str = "") -> jnp.ndarray:
     if is_traced(x):
         dtype = x.dtype
     else:
-        x = np.asarray(x) if not isinstance(x, jax.Array) else x
+        x = np.asarray(x) if not isinstance(x, jax.Array) else _uncommitted(x)
         dtype = x.dtype
     if jnp.issubdtype(dtype, jnp.complexfloating):
         raise DesignError(f"The design vector{of_body} is complex ({dtype}); densities are real numbers in [x_min, 1]. "
                           "Pass x.real if the imaginary part is meant to be zero.")
     if not (jnp.issubdtype(dtype, jnp.floating) or jnp.issubdtype(dtype, jnp.integer) or dtype == jnp.bool_):
         raise DesignError(f"The design vector{of_body} must hold real numbers, got dtype {dtype}.")
-    return _uncommitted(jnp.asarray(x, dtype=jnp.float64))
+    return jnp.asarray(x, dtype=jnp.float64)
 
 
 def _uncommitted(x):

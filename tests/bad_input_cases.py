@@ -453,6 +453,61 @@ API_32 += [
         lambda x: (jnp.sum(x), jnp.ones(4)), jnp.full(3, 0.5), fj.MMA(), iterations=1), V,
         r"gradient has shape \(4,\), but the design x has shape \(3,\)", "optimize() step trace"),
 ]
+def _without_x64(call):
+    """`call()` with JAX's float64 mode turned off, as by a user after `import ffr_jax` (turned on again after)."""
+    jax.config.update("jax_enable_x64", False)
+    try:
+        return call()
+    finally:
+        jax.config.update("jax_enable_x64", True)
+
+
+_X64 = r"ffr_jax computes in float64, but JAX's float64 mode \(jax_enable_x64\) is off: .* jax.config.update\('jax_enable_x64', True\)"
+API_32 += [
+    # "lax.add requires arguments to have the same dtypes" from deep inside the trace before; now the door says it.
+    Bad("x64 turned off after import: fj.value_and_grad", lambda c: _without_x64(lambda: fj.value_and_grad(c.case, c.x)),
+        V, "^ffr_jax.value_and_grad: " + _X64, "value_and_grad() entry"),
+    Bad("x64 turned off after import: fj.objective", lambda c: _without_x64(lambda: fj.objective(c.case, c.x)), V,
+        "^ffr_jax.objective: " + _X64, "objective() entry"),
+    Bad("x64 turned off after import: fj.simulate", lambda c: _without_x64(lambda: fj.simulate(c.case, c.x)), V,
+        "^ffr_jax.simulate: " + _X64, "simulate() entry"),
+]
+def _nan_integrand(c: Ctx) -> fj.Problem:
+    """The small case's scene with a user's integrand that turns NaN at t = 0.06 s (of 0.1 s)."""
+    problem = c.case.problem
+    integrand = fj.FunctionIntegrand(lambda t, y_r, z_r, scene: jnp.where(t > 0.06, jnp.nan, 1.0) * jnp.sum(z_r**2))
+    return fj.Problem(problem.scene, problem.t1, positions=problem.initial_state()[0], objective=integrand)
+
+
+def non_grashof_four_bar(t1: float, dt0: float | None = None) -> fj.Case:
+    """A four-bar that is no Grashof linkage (crank 0.4, coupler 1, rocker 0.5, ground 1.2: s + l = 1.6 > p + q =
+    1.5), as a user's own scene: `fj.cases.four_bar` refuses these lengths, so its code builds the scene with the
+    check left out. Its crank can turn from 0 to its limit angle 2.31 rad (|O2 - P| = coupler + rocker), which
+    the run-up law phi = 2 pi t^2 reaches at t = 0.607 s."""
+    from unittest import mock
+
+    with mock.patch("ffr_jax.cases._four_bar.check_grashof"):
+        case = fj.cases.four_bar(4, 2, 2, t1, crank=0.4, rocker=0.5, ground=1.2)
+    if dt0 is None:
+        return case
+    p = case.problem
+    problem = fj.Problem(p.scene, t1, positions=p.initial_state()[0], objective=p.objective,
+                         partition=p.model.partition, dependent_guess=p.model.dependent_guess, dt0=dt0)
+    return fj.Case(problem, case.design_map)
+
+
+# Rows that compile a program of their own (a new integrand, another scene): slow-marked in test_bad_input_fuzz.
+SLOW_32 = [
+    # "The maximum number of solver steps was reached ... increase max_steps" after 197 s before (a small budget
+    # here: the stall is the same at any budget).
+    Bad("integrand turning NaN midway: fj.objective", lambda c: fj.objective(_nan_integrand(c), max_steps=4000), SE,
+        "^The objective's integrand F turned NaN or inf along the motion", "compiled (failed solve)"),
+    Bad("integrand turning NaN midway: fj.value_and_grad autodiff", lambda c: fj.value_and_grad(
+        _nan_integrand(c), "autodiff", max_steps=4000), SE, "^The objective's integrand F turned NaN", "compiled (failed solve)"),
+    # The limit angle reached (t1 = 0.8 s): a toggle position, where the coupler and rocker are collinear.
+    Bad("non-Grashof four-bar driven past its limit angle", lambda c: fj.objective(*_at_half(non_grashof_four_bar(0.8))),
+        SE, "^Dead point", "compiled (dead-point check)"),
+]
 API += API_32
 
 # Every command line has the small mesh; the bad option is what fails, before anything compiles.
@@ -522,6 +577,16 @@ CLI_32 = [
     BadCli("export --design garbage.npz", "export slider-crank --design {setup}/garbage.npz --svg {tmp}/g.svg",
            "garbage.npz is not a design file .* pass the design.npz written by `ffr-jax optimize`", "CLI settings",
            lambda c: _garbage_npz(c.tmp)),
+]
+CLI_32 += [
+    # An OSError after the whole gradient was computed before: the directory is tried (a file created and removed)
+    # with the other options. /sys takes no new files, for root too, as a read-only file system (where
+    # os.access says yes for root).
+    BadCli("--json where no file can be created (/sys)", f"{G} --json /sys/psi.json",
+           r"--json /sys/psi.json: cannot create a file in /sys \(.*\); choose a directory you can write to",
+           "CLI output paths"),
+    BadCli("--plot where no file can be created (/sys)", f"{G} --plot /sys/g.png", "cannot create a file in /sys",
+           "CLI output paths"),
 ]
 CLI += CLI_32
 

@@ -146,7 +146,7 @@ def _gradient(args) -> int:
                 record["case"]["mesh_size"] = scene_settings(args.case, {"mesh_size": args.mesh_size})["mesh_size"]
             record["design_elements"] = np.asarray(case.design.domain.design_elements).tolist()
         text = json.dumps(_cli_checks.finite_record(record, f"--json {args.json}"), indent=1, allow_nan=False)
-        Path(args.json).write_text(text)
+        _cli_checks.written(lambda path: Path(path).write_text(text), args.json, "--json")
         print(f"wrote {args.json}")
     if args.plot is not None:
         if rod:
@@ -156,7 +156,7 @@ def _gradient(args) -> int:
             body = "link coupler" if args.case == "link-four-bar" else f"{args.case}, body {case.design_map.names[0]}"
             figure = plot_field(case, grad, signed=True, title=f"dpsi/dx ({args.method}), {body}, "
                                                                   f"x = {args.value}, psi = {psi:.6e}").figure
-        figure.savefig(args.plot, dpi=150)
+        _cli_checks.written(lambda path: figure.savefig(path, dpi=150), args.plot, "--plot")
         print(f"wrote {args.plot}")
     return 0
 

@@ -105,3 +105,14 @@ def finite_record(record: dict, where: str) -> dict:
 
     visit(record, "")
     return record
+
+
+def written(write, path, option: str) -> None:
+    """`write(path)`, with a file-system error (a read-only file system, a full disk, a directory removed
+    since the options were checked) as one `ValueError` naming the option and what was kept, instead of
+    an `OSError` traceback after the computation (issue 32)."""
+    try:
+        write(path)
+    except OSError as err:
+        raise ValueError(f"{option} {path}: could not write the file ({err.strerror or err}); the results printed "
+                         "above were computed but not saved. Choose a path you can write to and run again.") from None

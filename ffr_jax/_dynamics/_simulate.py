@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._errors import SimulationError, error_if
 from ._model import MinimalModel
 from .._objective._base import AbstractIntegrand
 from .._scene._scene import Scene
@@ -85,6 +86,44 @@ def minimal_vector_field(model: MinimalModel, t, state, scene: Scene, integrand:
     return state[1], zdot, integrand(t, y_r, z_r, scene)
 
 
+_NAN_INTEGRAND = (
+    "The objective's integrand F turned NaN or inf along the motion, where the positions and velocities are "
+    "finite: psi = int F dt cannot be integrated past that point, so the solver rejected every step there until "
+    "its step budget ran out. Make the integrand finite on every state the motion reaches (e.g. guard a sqrt, "
+    "log or division with jnp.where), and check it along the motion: ffr_jax.simulate(..., ts=...) gives the "
+    "states to evaluate it at."
+)
+
+
+def _failed_solve(model, scene, integrand, sol, out_ts, out, last, psi, t0, t1):
+    """`(positions, velocities, sol, psi)` at the output times, with a failed solve reported by its cause.
+
+    A solve that stopped short of `t1` (diffrax's `throw=False`) has not reached some output times:
+    their states are taken as the last state reached, `last = (t, y, z)` (finite, so that Newton's method
+    converges there). The integrand is evaluated at that state and a short step `1e-6 (t1 - t0)` past
+    it: a solve that failed at finite positions and velocities with a non-finite integrand there is the
+    integrand's (the step size control rejects every step whose `psi` is NaN), named by the error; any
+    other failure raises diffrax's own message (the step budget and its advice). A solve that reached
+    `t1` evaluates the same two points at `t1` and raises nothing.
+    """
+    failed = sol.result != diffrax.RESULTS.successful
+    t_last, y_last, z_last = last
+    t_probe = jnp.minimum(t_last + 1e-6 * (t1 - t0), t1)
+    y_probe = y_last + (t_probe - t_last) * z_last
+    reached = jnp.isfinite(out_ts)
+    ts_all = jnp.concatenate([jnp.where(reached, out_ts, t_last), jnp.stack([t_last, t_probe])])
+    ys_all = jnp.concatenate([jnp.where(reached[:, None], out[0], y_last), jnp.stack([y_last, y_probe])])
+    zs_all = jnp.concatenate([jnp.where(reached[:, None], out[1], z_last), jnp.stack([z_last, z_last])])
+    positions, velocities = jax.vmap(lambda t, y, z: model.state(t, y, z, scene))(ts_all, ys_all, zs_all)
+    values = jnp.stack([integrand(t, y_r, z_r, scene) for t, y_r, z_r in
+                        zip((t_last, t_probe), positions[-2:], velocities[-2:])])
+    states_finite = jnp.all(jnp.isfinite(positions[-2:])) & jnp.all(jnp.isfinite(velocities[-2:]))
+    integrand_fault = failed & states_finite & ~jnp.all(jnp.isfinite(values))
+    outputs = (positions[:-2], velocities[:-2], sol, psi)
+    outputs = error_if(outputs, integrand_fault, _NAN_INTEGRAND, SimulationError)
+    return sol.result.error_if(outputs, failed)
+
+
 def solve_minimal(
     model: MinimalModel,
     scene: Scene,
@@ -140,20 +179,28 @@ def solve_minimal(
         saveat = diffrax.SaveAt(t1=True, dense=dense)
     else:
         saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)], dense=dense)
+    # A failed solve is reported here rather than by diffrax where the objective has an integrand, so that
+    # an integrand turning NaN is named (issue 32). BacksolveAdjoint's backward solve takes the forward's
+    # `throw`: there diffrax keeps raising.
+    diagnose = integrand is not None and not isinstance(adjoint, diffrax.BacksolveAdjoint)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field), solver, t0, t1, dt0, state0, args=leaves, saveat=saveat,
-        stepsize_controller=controller, max_steps=max_steps, adjoint=adjoint,
+        stepsize_controller=controller, max_steps=max_steps, adjoint=adjoint, throw=not diagnose,
     )
     if ts is None:
-        out_ts, out, final = sol.ts, sol.ys, sol.ys
+        out_ts, out, final, final_ts = sol.ts, sol.ys, sol.ys, sol.ts
     else:
         (out_ts, final_ts), (out, final) = sol.ts, sol.ys
     model, scene_, integrand_, terminal_ = unpack(leaves)
     psi = final[2][-1] if integrand is not None else jnp.zeros((), y0.dtype)
+    if not diagnose:
+        positions, velocities = jax.vmap(lambda t, y, z: model.state(t, y, z, scene_))(out_ts, out[0], out[1])
+    else:
+        last = (final_ts[-1], final[0][-1], final[1][-1])
+        positions, velocities, sol, psi = _failed_solve(model, scene_, integrand_, sol, out_ts, out, last, psi, t0, t1)
     if terminal is not None:
         y_r1, z_r1 = model.state(jnp.asarray(t1, y0.dtype), final[0][-1], final[1][-1], scene_)
         psi = psi + terminal_(jnp.asarray(t1, y0.dtype), y_r1, z_r1, scene_)
-    positions, velocities = jax.vmap(lambda t, y, z: model.state(t, y, z, scene_))(out_ts, out[0], out[1])
     return Trajectory(
         ts=out_ts, ys=out[0], zs=out[1], positions=positions, velocities=velocities, psi=psi,
         num_steps=sol.stats["num_steps"], num_accepted_steps=sol.stats["num_accepted_steps"], solution=sol,
