@@ -18,3 +18,7 @@ from .design_map import AbstractDesignMap as AbstractDesignMap, DesignMap as Des
 from .filter import DensityFilter as DensityFilter
 from .stacked import StackedDesigns as StackedDesigns, StackedFilter as StackedFilter
 from .geometry import LinkMesh as LinkMesh, PlateWithHole as PlateWithHole, link_with_holes as link_with_holes, plate_with_hole as plate_with_hole, rod_domain as rod_domain, rod_joint_nodes as rod_joint_nodes
+from .element import AbstractSolidElement as AbstractSolidElement, H8 as H8, H11 as H11, Tet10 as Tet10
+from .solid_mesh import SolidGrid as SolidGrid, SolidMesh as SolidMesh, box_grid as box_grid, hex_to_tet10 as hex_to_tet10, read_solid_mesh as read_solid_mesh, solid_cell_data as solid_cell_data, solid_from_meshio as solid_from_meshio
+from .solid_assembly import SolidFEModel as SolidFEModel, SolidOperator as SolidOperator, solid_bcoo as solid_bcoo, solid_csc_matrices as solid_csc_matrices, solid_dense_matrix as solid_dense_matrix
+from .solid_modes import free_modes_dense as free_modes_dense, free_modes_sparse as free_modes_sparse, rigid_motions as rigid_motions
