@@ -251,7 +251,9 @@ def _quadrature_on_steps(problem, params, forward, backward: diffrax.DenseInterp
     n_p = jax.flatten_util.ravel_pytree(eqx.filter(params, eqx.is_inexact_array))[0].size
     chunk = quadrature_chunk(order, n_p, chunk)
     unit_nodes, unit_weights = (jnp.asarray(a) for a in gauss_legendre(order))
-    n_steps = backward.ts_size - 1
+    # A failed solve's step count is the largest integer in equinox's `nan` error mode (the cacheable programs):
+    # the loop is bounded by the buffer, never by that count (issue 32: an endless loop after the step budget).
+    n_steps = jnp.minimum(backward.ts_size - 1, backward.ts.shape[0] - 1)
     taus, infos, direction = backward.ts, backward.infos, backward.direction
 
     def integrand(t, mu, w):

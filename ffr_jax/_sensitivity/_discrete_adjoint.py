@@ -128,7 +128,10 @@ class DiscreteAdjoint(AbstractSensitivity):
         p_flat, unravel_p = jax.flatten_util.ravel_pytree(dynamic)
         field = _vector_field(problem)
         dense = forward.solution.interpolation
-        ts, starts, n_steps = dense.ts, dense.infos["y0"], dense.ts_size - 1
+        ts, starts = dense.ts, dense.infos["y0"]
+        # A failed solve's step count is the largest integer in equinox's `nan` error mode (the cacheable programs):
+        # the loop is bounded by the buffer, never by that count (issue 32: an endless loop after the step budget).
+        n_steps = jnp.minimum(dense.ts_size - 1, ts.shape[0] - 1)
         state_template = jtu.tree_map(lambda a: a[0], starts)
         u_template, unravel_u = jax.flatten_util.ravel_pytree(state_template)
         dtype = u_template.dtype

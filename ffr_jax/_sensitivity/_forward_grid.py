@@ -77,8 +77,11 @@ def backward_on_forward_grid(solver: AbstractRosenbrock, forward_dense, field, a
     **Returns:** a [`ForwardGridSolution`][].
     """
     tab = solver.tableau
-    ts, infos, n_steps = forward_dense.ts, forward_dense.infos, forward_dense.ts_size - 1
+    ts, infos = forward_dense.ts, forward_dense.infos
     max_steps = ts.shape[0] - 1
+    # A failed solve's step count is the largest integer in equinox's `nan` error mode (the cacheable programs):
+    # the loop is bounded by the buffer, never by that count (issue 32: an endless loop after the step budget).
+    n_steps = jnp.minimum(forward_dense.ts_size - 1, max_steps)
     mu1, w1 = state1
     f = mu1.shape[0]
     n = 2 * f
