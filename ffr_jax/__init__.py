@@ -38,6 +38,8 @@ from ._objective._compliance import Compliance as Compliance
 from ._objective._function import FunctionIntegrand as FunctionIntegrand
 from ._objective._kinetic_energy import KineticEnergy as KineticEnergy
 from ._objective._joint_load import JointLoad as JointLoad
+from ._objective._stress_measure import StressMeasure as StressMeasure
+from ._objective._aggregated_stress import aggregated_stress as aggregated_stress
 from ._objective._objective import Objective as Objective
 from ._objective._tracking import AbstractPath as AbstractPath, FixedPoint as FixedPoint, FunctionPath as FunctionPath, LinearPath as LinearPath, MarkerTracking as MarkerTracking
 from ._outputs._accelerations import redundant_accelerations as redundant_accelerations
@@ -45,6 +47,9 @@ from ._outputs._along_motion import accelerations as accelerations, joint_forces
 from ._outputs._joint_forces import JointForce as JointForce, joint_forces_at as joint_forces_at, joint_names as joint_names
 from ._outputs._multipliers import constraint_multipliers as constraint_multipliers
 from ._outputs._stresses import modal_stresses as modal_stresses, stress_modes as stress_modes, stresses as stresses, von_mises as von_mises
+from ._outputs._relaxed_stresses import relaxed_stress_modes as relaxed_stress_modes
+from ._outputs._peak_stress import peak_von_mises as peak_von_mises
+from ._app._stress_plot import plot_peak_stress as plot_peak_stress
 from ._dynamics._problem import Problem as Problem
 from ._scene._angle_driver import AngleDriver as AngleDriver
 from ._scene._applied_force import AppliedForce as AppliedForce
@@ -98,6 +103,7 @@ from ._optimize._pytree import OnBody as OnBody
 from ._optimize._projection import HeavisideProjection as HeavisideProjection, beta_continuation as beta_continuation
 from ._app._plot_optimize import plot_constraints as plot_constraints, plot_design as plot_design, plot_designs as plot_designs, plot_history as plot_history
 from ._optimize._step import StepInfo as StepInfo, make_step as make_step
+from ._optimize._stress_constraint import stress_constraint as stress_constraint
 from ._optimize._volume import VolumeConstraint as VolumeConstraint
 
 

@@ -180,12 +180,13 @@ def test_vtu_series_carries_the_von_mises_stress(rod, tmp_path):
     (the same program: 1e-12), `peak_von_mises` its maximum over the frames."""
     import meshio
 
+    from ffr_jax._app._animation import body_motion
     from ffr_jax._outputs._peak_stress import element_von_mises
 
     case, x = rod
     pvd = fj.write_vtu_series(tmp_path / "motion.pvd", case, x, frames=3)
     frames = [meshio.read(f) for f in sorted((tmp_path / "motion_vtu").glob("*.vtu"))]
-    _, _, y_r = fj.body_motion(case, x, np.linspace(case.t0, case.t1, 3))  # the motion the series draws
+    _, _, y_r = body_motion(case, x, np.linspace(case.t0, case.t1, 3))  # the motion the series draws
     expected = np.asarray(element_von_mises(case.design, x, jnp.asarray(y_r[:, 3:])))
     scale = expected.max()
     for k, frame in enumerate(frames):

@@ -22,7 +22,7 @@ def write_vtu_series(path, case: Case, x_phys, *, frames: int = 60, rtol: float 
     Vector* with scale factor 1 draws the true deformed body, a larger factor amplifies it), and
     cell data `density` (physical density of every element, passive ones included) and `design`
     (1 on design elements, 0 on passive ones), `von_mises` (the element's von Mises stress at time
-    `t_k`, the largest of its 2x2 Gauss points, from the stress modes: [`element_von_mises`][]) and
+    `t_k`, the largest of its 2x2 Gauss points, from the stress modes) and
     `peak_von_mises` (its peak over all frames, [`peak_von_mises`][]; both in Pa, the macroscopic
     SIMP stress). The `.pvd` lists the files with their times, so
     ParaView plays the motion. The motion is `body_motion`'s: one simulation with output at
