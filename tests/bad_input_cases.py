@@ -504,6 +504,13 @@ SLOW_32 = [
         "^The objective's integrand F turned NaN or inf along the motion", "compiled (failed solve)"),
     Bad("integrand turning NaN midway: fj.value_and_grad autodiff", lambda c: fj.value_and_grad(
         _nan_integrand(c), "autodiff", max_steps=4000), SE, "^The objective's integrand F turned NaN", "compiled (failed solve)"),
+    # A long horizon on the cached gradient (nan-mode programs, which fj.value_and_grad and the CLI run): before, the
+    # step count of the failed solve became the largest integer there and the adjoint's quadrature looped without
+    # end (the CLI gave no result in 1,500 s; from Python, over 20 minutes at t1 = 300). A small budget: the same
+    # failure at any budget.
+    Bad("t1 = 1000 through the cached gradient: fj.value_and_grad(max_steps=2000)", lambda c: fj.value_and_grad(
+        slider_crank(t1=1000.0), slider_crank(t1=1000.0).initial_design(0.5), "adjoint", max_steps=2000), SE,
+        "^The maximum number of solver steps was reached", "compiled (step budget)"),
     # The limit angle reached (t1 = 0.8 s): a toggle position, where the coupler and rocker are collinear.
     Bad("non-Grashof four-bar driven past its limit angle", lambda c: fj.objective(*_at_half(non_grashof_four_bar(0.8))),
         SE, "^Dead point", "compiled (dead-point check)"),
@@ -585,6 +592,8 @@ CLI_32 += [
     BadCli("--json where no file can be created (/sys)", f"{G} --json /sys/psi.json",
            r"--json /sys/psi.json: cannot create a file in /sys \(.*\); choose a directory you can write to",
            "CLI output paths"),
+    BadCli("gradient --max-steps 0", f"{G} --max-steps 0", r"max_steps of the CLI \(--max-steps\) must be an integer >= 1",
+           "CLI options"),
     BadCli("--plot where no file can be created (/sys)", f"{G} --plot /sys/g.png", "cannot create a file in /sys",
            "CLI output paths"),
 ]

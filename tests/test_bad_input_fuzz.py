@@ -50,6 +50,22 @@ def test_api_bad_input_compiling_its_own_program(ctx, bad):
     test_api_bad_input(ctx, bad)
 
 
+@pytest.mark.slow
+def test_cli_long_horizon_ends_with_the_step_budget(ctx):
+    """Issue 32: `ffr-jax gradient ... --t1 1000` (no result in 1,500 s before) ends with the API's error once the
+    step budget is used up: exit status 2 and one line. A budget of 2,000 steps (`--max-steps`, the API's
+    `max_steps`) for the test; the default 200,000 behaves alike (benchmarks/RESULTS.md, "Bad input (issue 32)")."""
+    from bad_input_cases import BadCli
+
+    bad = BadCli("t1 = 1000", "gradient slider-crank --nx 4 --ny 2 --modes 2 --t1 1000 --max-steps 2000",
+                 "^ffr-jax: error: The maximum number of solver steps was reached", "CLI (compiled)")
+    status, out, err = run_cli(ctx, bad)
+    assert status == 2, (status, out[-300:], err[-300:])
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ffr-jax: error: The maximum number of solver steps was reached"), err
+    assert not any(word in err for word in FOREIGN), err
+
+
 @pytest.mark.parametrize("bad", CLI, ids=[b.name for b in CLI])
 def test_cli_bad_input(ctx, bad):
     status, out, err = run_cli(ctx, bad)
@@ -106,7 +122,8 @@ def test_every_issue_32_item_has_a_row():
              "SpringDamper(stiffness=nan)", "Gravity((0, nan))", "ConstantSpeedLaw(nan)",
              "FunctionConstraint with a NaN bound", "MMA with x0 of the wrong length",
              "x64 turned off after import: fj.value_and_grad", "--json where no file can be created (/sys)",
-             "integrand turning NaN midway: fj.objective", "non-Grashof four-bar driven past its limit angle"]
+             "integrand turning NaN midway: fj.objective", "non-Grashof four-bar driven past its limit angle",
+             "t1 = 1000 through the cached gradient: fj.value_and_grad(max_steps=2000)", "gradient --max-steps 0"]
     assert not set(items) - names - {b.name for b in SLOW_32}, set(items) - names - {b.name for b in SLOW_32}
 
 

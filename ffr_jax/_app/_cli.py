@@ -84,6 +84,7 @@ def _gradient(args) -> int:
     events = cache_events()
     directory = None if args.no_cache else cache_directory()
     compiled, info = compile_value_and_grad(case, x, sensitivity_method(method), rtol=args.rtol, atol=args.atol,
+                                            max_steps=args.max_steps,
                                             export_dir=None if directory is None else directory / "programs")
     compile_s = info["compile_s"]
     compiled = clean_errors(compiled)  # run-time errors with the package's message
@@ -182,6 +183,9 @@ def _add_gradient_parser(sub) -> None:
                    help="absolute tolerance of the backward solve (default 1e-10; keep it well below |psi|)")
     p.add_argument("--fd-step", type=float, default=None,
                    help="finite-difference step for --method fd (default: ffr_jax.FiniteDifferences's)")
+    p.add_argument("--max-steps", type=int, default=200_000,
+                   help="step budget of each solve, as max_steps of ffr_jax.value_and_grad (default 200000); "
+                        "a run that uses it up stops with the same error as the API")
     p.add_argument("--repeat", type=int, default=1,
                    help="calls of the compiled gradient to time (default 1: one solve; 2 or more also times calls "
                         "after the first)")

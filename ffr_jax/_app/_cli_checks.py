@@ -41,6 +41,7 @@ def gradient_options(args) -> None:
             raise ValueError(f"--fd-step applies to --method fd, not {args.method}.")
         _checks.in_interval(args.fd_step, "--fd-step", 0.0, (1.0 - X_MIN) / 2, low_open=True, high_open=True,
                             advice="It is the finite-difference step h (about 1e-4 to 1e-6).")
+    _checks.max_steps(args.max_steps, "the CLI (--max-steps)")
     if not args.repeat >= 1:
         raise ValueError(f"--repeat is the number of timed calls, at least 1, got {args.repeat}.")
     if args.json is not None:
