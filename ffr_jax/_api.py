@@ -18,6 +18,7 @@ import warnings
 
 import diffrax
 import equinox as eqx
+import jax
 import numpy as np
 
 from . import _checks
@@ -33,7 +34,8 @@ from ._sensitivity._base import AbstractSensitivity
 from ._sensitivity._direct import Direct
 from ._sensitivity._discrete_adjoint import DiscreteAdjoint
 from ._sensitivity._finite_differences import FiniteDifferences
-from ._sensitivity._cached import Uncacheable, cache_directory, cacheable, cached_value_and_grad, use_persistent_cache
+from ._sensitivity._cached import (Uncacheable, cache_directory, cacheable, cached_value_and_grad, kept_call,
+                                  use_persistent_cache)
 from ._sensitivity._check import GradientCheck, compare_with_differences
 from ._sensitivity._route import choose_route
 from ._dynamics._simulate import Trajectory, simulate as simulate_redundant, solve_minimal
@@ -127,6 +129,27 @@ def _simulate_problem_fn(problem, solver, rtol, atol, ts, dense, max_steps, adjo
 
 def _simulate_case_fn(case, x, solver, rtol, atol, ts, dense, max_steps, adjoint):
     return _simulate_problem_fn(case.problem_for(case.check(x)), solver, rtol, atol, ts, dense, max_steps, adjoint, None)
+
+
+def _objective_problem_fn(problem, solver, rtol, atol, max_steps):
+    return _simulate_problem_fn(problem, solver, rtol, atol, None, False, max_steps, None, None).psi
+
+
+def _objective_case_fn(case, x, solver, rtol, atol, max_steps):
+    return _simulate_case_fn(case, x, solver, rtol, atol, None, False, max_steps, None).psi
+
+
+def _kept(function, args, what: str, plain):
+    """`function(*args)` through a program kept between processes (`_sensitivity/_cached.py`) where the cache
+    is on and the arguments are concrete and keyable, else `plain()` (the in-process compiled program)."""
+    traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(args))
+    directory = None if traced else cache_directory()
+    if directory is not None:
+        use_persistent_cache(directory)
+        out = kept_call(function, args, directory, what)
+        if out is not None:
+            return out
+    return plain()
 
 
 def _value_and_grad_problem_fn(problem, method, rtol, atol, solver, max_steps):
@@ -270,9 +293,11 @@ def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, ato
     if isinstance(target, Problem):
         if x is not None:
             raise ValueError("A Problem has no design vector: call objective(problem).")
-        return _simulate_problem(target, solver, rtol, atol, None, False, max_steps, None, None).psi
-    return _simulate_case(target, _design(target, x, "objective"), solver, rtol, atol, None, False, max_steps,
-                          None).psi
+        return _kept(_objective_problem_fn, (target, solver, rtol, atol, max_steps), "the objective of a problem",
+                     lambda: _simulate_problem(target, solver, rtol, atol, None, False, max_steps, None, None).psi)
+    x = _design(target, x, "objective")
+    return _kept(_objective_case_fn, (target, x, solver, rtol, atol, max_steps), "the objective of a case",
+                 lambda: _simulate_case(target, x, solver, rtol, atol, None, False, max_steps, None).psi)
 
 
 @clean_errors
@@ -341,7 +366,9 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
         if check:
             raise ValueError("value_and_grad(problem, check=True): the gradient check differences a design; "
                              "build a Case (problem + design map) to check a design gradient.")
-        return _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps, detail=detail)
+        return _kept(_value_and_grad_problem_fn, (problem, method, rtol, atol, solver, max_steps),
+                     f"the gradient of a problem ({detail})",
+                     lambda: _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps, detail=detail))
     x = _design(target, x, "value_and_grad")
     directory = None if _checks.is_traced(x) or not cacheable(method) else cache_directory()
     result = None if directory is None else _cached(target, x, method, rtol, atol, solver, max_steps, directory, detail)

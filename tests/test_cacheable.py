@@ -70,6 +70,25 @@ def test_a_lambda_in_the_static_part_is_never_keyed():
     assert _program_key((lambda t: t,), treedef, leaves, {}) is None, "a lambda has none"
 
 
+def test_a_function_counts_by_its_code_and_a_closure_is_never_keyed():
+    # Two functions of one name with different bodies (a user's integrand edited between two runs, or two
+    # scripts) must not share a kept program; a closure's behaviour depends on what it captured.
+    leaves, treedef = jax.tree_util.tree_flatten(jnp.zeros(3))
+    namespace_a, namespace_b = {}, {}
+    exec("def integrand(t):\n    return t", namespace_a)
+    exec("def integrand(t):\n    return 2.0 * t", namespace_b)
+    key_a = _program_key((namespace_a["integrand"],), treedef, leaves, {})
+    key_b = _program_key((namespace_b["integrand"],), treedef, leaves, {})
+    assert key_a is not None and key_b is not None and key_a != key_b
+
+    def factory(w):
+        def integrand(t):
+            return w * t
+        return integrand
+
+    assert _program_key((factory(1.0),), treedef, leaves, {}) is None
+
+
 # --- from Python: a second process loads the compiled gradient (issue 28) -------------------------
 PROGRAM = """
 import json, logging, sys, time
@@ -91,7 +110,9 @@ first = time.perf_counter() - start
 start = time.perf_counter()
 fj.value_and_grad(case, x * 0.9)
 later = time.perf_counter() - start
+objective = float(fj.objective(case, x))
 print(json.dumps(dict(psi=float(psi), grad=np.asarray(grad).tolist(), first=first, later=later, log=records,
+                      objective=objective,
                       xla=cache_events())))
 """
 
@@ -119,6 +140,9 @@ def test_a_second_process_loads_the_gradient_instead_of_compiling(tmp_path):
     getting = [m for m in second["log"] if m.startswith("getting the design gradient")]
     assert len(getting) == 1 and "loading it from the cache" in getting[0], second["log"]
     assert not any(m.startswith("compiling") for m in second["log"]), second["log"]
+    assert any(m.startswith("compiling the objective of a case") for m in first["log"]), first["log"]
+    assert any(m.startswith("loading the objective of a case") for m in second["log"]), second["log"]
+    assert second["objective"] == first["objective"]
     assert second["xla"]["cache_hits"] >= 1, second["xla"]  # the scene gradient's XLA program, from disk
     # The same exported program compiled by the same XLA: bit-identical numbers.
     assert second["psi"] == first["psi"] and second["grad"] == first["grad"]

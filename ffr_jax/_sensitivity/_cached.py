@@ -40,14 +40,17 @@ but finite differences is the pull-back of its scene gradient (see `AbstractSens
 """
 
 import contextlib
+import dataclasses
 import functools
 import logging
 import hashlib
 import importlib.metadata
+import inspect
 import os
 import pathlib
 import re
 import time
+import types
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -109,13 +112,52 @@ def _source_digest() -> str:
     return h.hexdigest()
 
 
+def _functions_in(obj, seen=None):
+    """Every Python function reachable from `obj` through modules' fields, containers and partials."""
+    seen = set() if seen is None else seen
+    if id(obj) in seen:
+        return
+    seen.add(id(obj))
+    if isinstance(obj, types.FunctionType):
+        yield obj
+    elif isinstance(obj, functools.partial):
+        yield from _functions_in((obj.func, obj.args, obj.keywords), seen)
+    elif isinstance(obj, (tuple, list)):
+        for item in obj:
+            yield from _functions_in(item, seen)
+    elif isinstance(obj, dict):
+        for item in obj.values():
+            yield from _functions_in(item, seen)
+    elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        for field in dataclasses.fields(obj):
+            yield from _functions_in(getattr(obj, field.name, None), seen)
+
+
+def _function_token(function) -> str | None:
+    """A text that identifies a function across processes: its module, name and code (bytecode, constants,
+    names); `None` for a closure or a lambda, whose behaviour its code does not fix. A wrapper that names
+    what it wraps (`functools.wraps`, e.g. a runtime type checker's) counts as the wrapped function."""
+    function = inspect.unwrap(function)
+    if not isinstance(function, types.FunctionType):
+        return None
+    if function.__closure__ or function.__name__ == "<lambda>":
+        return None
+    code = function.__code__
+    digest = hashlib.sha256(code.co_code + repr((code.co_consts, code.co_names, function.__defaults__)).encode())
+    return f"<function {function.__module__}.{function.__qualname__} {digest.hexdigest()[:16]}>"
+
+
 def _program_key(static, treedef, leaves, options) -> str | None:
-    """The key of an exported program, or `None` when its static part has no stable text (e.g. a
-    user's function, whose repr holds a memory address): such a program is traced every time."""
+    """The key of an exported program, or `None` when its static part has no text that identifies it
+    across processes (a closure or a lambda, any other object shown by its address): such a program is
+    not kept. A named function counts by its module, name and code, so that two functions of one name
+    with different bodies never share a program."""
     text = repr((static, options)) + str(treedef)
-    # A named function (e.g. a case's Newton guess) by its name; a lambda or a closure has no name
-    # that identifies it, nor has any other object shown by its address.
-    text = re.sub(r"<function ([\w.]+) at 0x[0-9a-f]+>", r"<function \1>", text)
+    for function in _functions_in((static, options)):
+        token = _function_token(function)
+        if token is None:
+            return None
+        text = text.replace(f"<function {function.__qualname__} at 0x{id(function):x}>", token)
     if " at 0x" in text:
         return None
     h = hashlib.sha256(_source_digest().encode())
@@ -343,6 +385,71 @@ def _export(path, function, leaves):
             warnings.warn(f"ffr_jax: the compiled gradient could not be kept in {path.parent} ({err.strerror}).",
                           RuntimeWarning, stacklevel=4)
     return exported
+
+
+class _Kept(eqx.Module):
+    """One compiled program of any function whose outputs are finite arrays, and the structure that turns
+    its flat outputs back into the function's output."""
+
+    compiled: Callable = eqx.field(static=True)
+    out_static: Any = eqx.field(static=True)
+    out_treedef: Any = eqx.field(static=True)
+    loaded: bool = eqx.field(static=True)
+    seconds: float = eqx.field(static=True)
+
+    def __call__(self, function, args):
+        out = eqx.combine(jax.tree_util.tree_unflatten(self.out_treedef, list(self.compiled(*_leaves(args)))),
+                          self.out_static)
+        if not _finite(out):  # a check failed in the cacheable program: run it again with the checks raising
+            _raising(function, *args)
+            raise FloatingPointError("A result is not finite, and no check of the package fired: rerun with "
+                                     "FFR_JAX_NO_CACHE=1 and report the case.")
+        return out
+
+
+# Kept programs of this process by program key (like the cache of a jitted function).
+_KEPT: dict[str, _Kept] = {}
+
+
+def kept_call(function, args: tuple, directory: pathlib.Path, what: str):
+    """`function(*args)` (outputs: finite arrays) through a program kept in `directory / "programs"`: loaded
+    when a process kept it there, else traced with the checks in `nan` mode, exported and kept; `None` where
+    the arguments have no key that identifies them across processes (then use the plain compiled path).
+    Says on the package's logger, once per process and program, whether it compiles or loads."""
+    dynamic, static = eqx.partition(args, _is_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dynamic)
+    shapes = [jax.ShapeDtypeStruct(leaf.shape, leaf.dtype) for leaf in leaves]
+    key = _program_key((function.__name__, static), treedef, shapes, {})
+    if key is None:
+        return None
+    if key not in _KEPT:
+        logger = logging.getLogger("ffr_jax")
+        path = _load_path(key, directory / "programs")
+        loading = path.is_file()
+        logger.info("%s %s (first call in this process for these shapes and settings)...",
+                    "loading" if loading else "compiling", what)
+        start = time.perf_counter()
+        out_dynamic, out_static = eqx.partition(eqx.filter_eval_shape(function, *args), _is_array)
+        flat = _flat(function, static, treedef)
+        exported = _load(path)
+        if exported is None:
+            with _checks_as_nan():
+                try:
+                    exported = _export(path, flat, shapes)
+                except Exception as err:  # not exportable: compiled below with the checks raising
+                    logger.info("%s cannot be exported (%s: %s); it is compiled in every process", what,
+                                type(err).__name__, err)
+        if exported is None:
+            compiled = jax.jit(flat).lower(*shapes).compile()
+        else:  # XLA: from the persistent cache when it has the program
+            compiled = jax.jit(exported.call).lower(*shapes).compile()
+        _KEPT[key] = _Kept(compiled, out_static, jax.tree_util.tree_structure(out_dynamic), exported is not None
+                           and loading, time.perf_counter() - start)
+        out = _KEPT[key](function, args)
+        logger.info("%s: %s and ran in %.1f s (cache: %s)", what, "loaded" if _KEPT[key].loaded else "compiled",
+                    time.perf_counter() - start, directory)
+        return out
+    return _KEPT[key](function, args)
 
 
 def cached_value_and_grad(case: Case, x, method: AbstractSensitivity, *, rtol: float, atol: float, solver=None,
