@@ -102,6 +102,8 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--measure")
     parser.add_argument("--targets", nargs="+", default=list(TARGETS))
+    parser.add_argument("--section", default="Compile time",
+                        help="the RESULTS section to write (a later run beside an earlier one: another name)")
     args = parser.parse_args()
     if args.measure:
         print(json.dumps(measure(args.measure)))
@@ -110,7 +112,10 @@ def main():
     for target in args.targets:
         with tempfile.TemporaryDirectory() as cache:
             env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": cache, "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
-                   "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0"}
+                   "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0",
+                   # the package's kept programs (issue 28) in the same new directory
+                   "FFR_JAX_CACHE_DIR": cache}
+            env.pop("FFR_JAX_NO_CACHE", None)
             pair = []
             for _ in range(2):
                 out = subprocess.run([sys.executable, __file__, "--measure", target], capture_output=True, text=True,
@@ -124,8 +129,9 @@ def main():
     from _results import machine, write_section
 
     lines = [
-        "Command: `python benchmarks/bench_compile_time.py` (two fresh processes per target, one after the other, with",
-        f"a new, empty persistent compilation cache shared by the two). Machine: {machine()}; default XLA settings.",
+        f"Command: `python benchmarks/bench_compile_time.py --targets {' '.join(args.targets)}` (two fresh processes per",
+        "target, one after the other, with a new, empty cache directory shared by the two: JAX's persistent",
+        f"compilation cache and the package's kept programs). Machine: {machine()}; default XLA settings.",
         "",
         "Targets: `reference-gradient` `fj.value_and_grad(fj.cases.slider_crank(), x)` with no options (the default",
         "route: the discrete adjoint of Rodas5P), `reference-adjoint` the same with `method=\"adjoint\"` (the default",
@@ -142,7 +148,7 @@ def main():
             f"| {one['target']} | {one['first']:.1f} | {one['trace']:.1f} / {one['lower']:.1f} / {one['xla']:.1f} | "
             f"{one['later']:.2f} | {two['first']:.1f} | {two['trace']:.1f} / {two['lower']:.1f} / {two['xla']:.1f} | "
             f"{two['hits']} / {two['misses']} | {one['load']:.1f} |")
-    write_section("Compile time", "\n".join(lines))
+    write_section(args.section, "\n".join(lines))
 
 
 if __name__ == "__main__":
