@@ -12,7 +12,8 @@ densities and the peak von Mises fields as pictures (results/stress_limited/).
 The rod is reduced (a small mesh, few modes, a short motion, few MMA steps) so that both runs fit a few
 minutes on a 2-core machine: say so where the numbers are quoted.
 
-Usage: `python benchmarks/bench_stress_limited.py [--nx 24 --ny 4 --modes 4 --t1 1.0 --iters 25]`. Writes the
+Usage: `python benchmarks/bench_stress_limited.py [--nx 24 --ny 4 --modes 4 --t1 1.0 --iters 25
+--limited-iters 40 --limit-factor 0.85 --reuse]`. Writes the
 RESULTS.md section "Stress-limited rod (issue 31)" (default settings only).
 """
 
@@ -25,10 +26,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import ffr_jax as fj
-from ffr_jax._app._stress_plot import plot_peak_stress
-from ffr_jax._objective._aggregated_stress import aggregated_stress
-from ffr_jax._optimize._stress_constraint import stress_constraint
-from ffr_jax._outputs._peak_stress import peak_von_mises
 
 OUT = pathlib.Path(__file__).parent / "results" / "stress_limited"
 RTOL, ATOL = 1e-8, 1e-10
@@ -44,10 +41,10 @@ def run(case, filt, constraints, iters):
 
 def measure(case, x_phys, limit):
     psi = float(fj.objective(case, x_phys, rtol=1e-10, atol=1e-12))
-    sigma_pn = float(aggregated_stress(case, x_phys, limit, rtol=RTOL, atol=ATOL)[0])
+    sigma_pn = float(fj.aggregated_stress(case, x_phys, limit, rtol=RTOL, atol=ATOL)[0])
     traj = fj.simulate(case, x_phys, ts=jnp.linspace(case.t0, case.t1, 201), rtol=1e-10, atol=1e-12)
-    relaxed = np.asarray(peak_von_mises(case, traj, x_phys, relaxation=0.5))
-    macro = np.asarray(peak_von_mises(case, traj, x_phys))
+    relaxed = np.asarray(fj.peak_von_mises(case, traj, x_phys, relaxation=0.5))
+    macro = np.asarray(fj.peak_von_mises(case, traj, x_phys))
     return dict(psi=psi, sigma_pn=sigma_pn, peak_relaxed=float(relaxed.max()), peak_macro=float(macro.max()),
                 volume=float(np.mean(x_phys))), relaxed
 
@@ -59,22 +56,29 @@ def main():
     parser.add_argument("--modes", type=int, default=4)
     parser.add_argument("--t1", type=float, default=1.0)
     parser.add_argument("--iters", type=int, default=25)
-    parser.add_argument("--limit-factor", type=float, default=0.7)
+    parser.add_argument("--limited-iters", type=int, default=40, help="MMA steps of the stress-limited run")
+    parser.add_argument("--limit-factor", type=float, default=0.85)
+    parser.add_argument("--reuse", action="store_true", help="reuse the stored compliance-optimal design")
     args = parser.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     case = fj.cases.slider_crank(args.nx, args.ny, args.modes, args.t1)
     filt = fj.DensityFilter(case.design, 1.5)
     volume = fj.VolumeConstraint(0.5, x_min=case.material.x_min, filter=filt)
 
-    plain, wall_plain = run(case, filt, [volume], args.iters)
-    x_plain = np.asarray(filt(plain.x))
+    stored = OUT / "compliance_design.npz"
+    if args.reuse and stored.exists():
+        x_plain, wall_plain = np.load(stored)["x_phys"], float(np.load(stored)["wall_s"])
+    else:
+        plain, wall_plain = run(case, filt, [volume], args.iters)
+        x_plain = np.asarray(filt(plain.x))
+        np.savez(stored, x_phys=x_plain, wall_s=wall_plain)
     probe = 1e6  # any normalisation: sigma_PN does not depend on it
     stats_plain, _ = measure(case, x_plain, probe)
     limit = args.limit_factor * stats_plain["sigma_pn"]
     stats_plain, peak_plain = measure(case, x_plain, limit)
 
-    stress = stress_constraint(case, limit, filter=filt, rtol=RTOL, atol=ATOL)
-    limited, wall_limited = run(case, filt, [volume, stress], args.iters)
+    stress = fj.stress_constraint(case, limit, filter=filt, rtol=RTOL, atol=ATOL)
+    limited, wall_limited = run(case, filt, [volume, stress], args.limited_iters)
     x_limited = np.asarray(filt(limited.x))
     stats_limited, peak_limited = measure(case, x_limited, limit)
 
@@ -82,7 +86,7 @@ def main():
     for name, x, peak in (("compliance", x_plain, peak_plain), ("stress_limited", x_limited, peak_limited)):
         ax = fj.plot_design(case, x, title=f"{name.replace('_', '-')} design, volume {np.mean(x):.3f}")
         ax.figure.savefig(OUT / f"density_{name}.png", dpi=120)
-        ax = plot_peak_stress(case, peak, limit=limit, vmax=vmax,
+        ax = fj.plot_peak_stress(case, peak, limit=limit, vmax=vmax,
                               title=f"peak relaxed von Mises, {name.replace('_', '-')} design")
         ax.figure.savefig(OUT / f"peak_von_mises_{name}.png", dpi=120)
     summary = dict(settings=vars(args), limit=limit, compliance=stats_plain, stress_limited=stats_limited,
