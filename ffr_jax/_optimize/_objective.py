@@ -129,4 +129,8 @@ def make_objective(case: Case | OperatingConditions, method: str | AbstractSensi
     # another case, mesh, filter, projection, method or tolerance is refused.
     out.fingerprint = tree_fingerprint((case, filter, projection, method, tuple(sorted(kwargs.items()))))
     out.design_size = (case.case if isinstance(case, OperatingConditions) else case).n_design  # checked by optimize
+    # A case's objective runs its own compiled programs (fj.value_and_grad: compiled once, and kept between
+    # processes for a concrete design), so make_step calls it as it is instead of tracing it into a program of
+    # its own, which a later process would have to compile again.
+    out.compiles_itself = not isinstance(case, OperatingConditions)
     return out

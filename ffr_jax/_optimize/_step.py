@@ -143,7 +143,8 @@ def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
     satisfies `x_min <= x <= 1` and `mean(c x) = V`; with [`MMA`][] the constraints `g_i` and
     their gradients are evaluated at `x` too and MMA's subproblem gives `x_new`. The step is two
     jit-compiled programs, `step.objective` (`fun`; one program per `fun` object, shared by all
-    steps made from it) and `step.advance` (constraints and update; one program per optimizer and
+    steps made from it; the objective of [`make_objective`][] on a case runs its own programs, which a
+    later process loads from the cache instead of compiling) and `step.advance` (constraints and update; one program per optimizer and
     constraint objects), each compiled on its first call and reused for every later one as long as
     `x` and `state` keep their shapes and dtypes (which the loop does); `beta` is a traced argument,
     so a continuation that raises it does not recompile.
@@ -178,11 +179,15 @@ def make_step(fun: Callable, optimizer, constraints=None) -> Callable:
     # its gradient) dominates compile time; compiled alone, and keyed on `fun` itself, it is traced
     # once per `fun` object, whatever optimizer or constraints later steps use it with. The update is
     # keyed on the optimizer and constraint objects.
-    try:
-        hash(fun)
-        objective = functools.partial(_objective, fun=fun)
-    except TypeError:
-        objective = jax.jit(lambda x, beta: _call(fun, x, beta))
+    if getattr(fun, "compiles_itself", False):  # make_objective of a case: its own programs, kept between processes
+        def objective(x, beta):
+            return _call(fun, x, beta)
+    else:
+        try:
+            hash(fun)
+            objective = functools.partial(_objective, fun=fun)
+        except TypeError:
+            objective = jax.jit(lambda x, beta: _call(fun, x, beta))
 
     advance = functools.partial(_advance, rule=_Identity(optimizer, constraints, volume))
 
