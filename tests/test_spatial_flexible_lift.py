@@ -90,3 +90,22 @@ def test_planar_motion_of_the_lifted_body_is_the_planar_motion(rod):
     m_got, m_want, f_got, f_want = both(planar, spatial, y, z)
     _close(m_got, m_want, "mass matrix")
     _close(f_got, f_want, "forces")
+
+
+def test_marker_rotations_of_rigid_fields():
+    """The elastic rotation at a marker is the rotation of the least-squares rigid fit of its patch: exactly 1 for
+    the field of an infinitesimal turn about `z` (`phi_n = z x c_n`), exactly 0 for a translation, at a one-node
+    marker (patch of elements) and a node-set marker alike (round-off of a sum over a few nodes)."""
+    body = fj.cases.rod_body(4, 2, 2)
+    model = body.model
+    c = np.asarray(model.coordinates)
+    turn = np.stack([-c[:, 1], c[:, 0]], axis=1).ravel()
+    shift = np.tile([0.3, -0.7], c.shape[0])
+    modes = jnp.asarray(np.stack([turn, shift], axis=1))
+    _, m = body.matrices(body.initial_design(0.5))
+    markers = (body.markers[0], (body.markers[1], body.markers[1] - 1))
+    k = jnp.eye(model.n_dof)  # any positive definite stiffness (a rigid field's own is zero up to round-off)
+    psi = np.asarray(fj.lifted_body_data(model, k, m, modes, markers).marker_rotations)
+    np.testing.assert_allclose(psi[:, 2, 0], 1.0, rtol=0, atol=ROUNDOFF, err_msg="rotation of a rigid turn")
+    np.testing.assert_allclose(psi[:, 2, 1], 0.0, rtol=0, atol=ROUNDOFF, err_msg="rotation of a translation")
+    assert np.all(psi[:, :2] == 0.0), "in-plane fields rotate about z only"
