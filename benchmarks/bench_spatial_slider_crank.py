@@ -70,9 +70,11 @@ psi: spatial vs planar {psi_diff:.1e} relative (bound 1e-8); design gradient {gr
 {s['gradient'] / p['gradient']:.2f}x (issue 26's target: at most 2x); building the spatial case {build:.0f} s. The
 compile times are the cost of the spatial equations' size (rotation matrices and Euler parameters in every joint and
 body, ~7x the traced operations of the planar constraint and force functions).
-Not measured, a likely cause of the run-time ratio: the 14 dependent coordinates (rod and crank) exceed
-`_small_linalg.UNROLL_MAX` = 12, so every Newton and velocity solve calls LAPACK (a fixed cost per call) where the
-planar case's 3 x 3 system is solved in closed form; a rheonomic spatial crank pin (no crank body) would leave 7.
+Not the cause of the run-time ratio: the LAPACK calls of the 14 x 14 dependent solves (above
+`_small_linalg.UNROLL_MAX` = 12): unrolled (`UNROLL_MAX = 16`) the spatial forward run takes 0.30 s instead of
+0.18 s (same process setup, load ~5, 03:03 UTC). The remaining suspects, not measured: the size of the
+equations (16 redundant coordinates, Euler parameters and rotation matrices in every joint and body, and their
+derivatives); a rheonomic spatial crank pin instead of the crank body would leave 7 dependent coordinates.
 
 Tests: `tests/test_spatial_flexible_slider_crank.py` (psi, gradient, central differences for densities and body
 data, adjoint = autodiff; `-m slow`), `tests/test_spatial_flexible_lift.py`, `tests/test_spatial_flexible_body.py`,
