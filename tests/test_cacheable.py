@@ -149,3 +149,16 @@ def test_a_second_process_loads_the_gradient_instead_of_compiling(tmp_path):
     # Loading skips tracing and XLA's compilation of the solves: measured 116 s -> 9.7 s on a loaded 2-core
     # machine (load 10). Half is a bound that only a second compilation of the solves would break.
     assert second["first"] < 0.5 * first["first"], (first["first"], second["first"])
+
+
+@pytest.mark.slow
+def test_a_failed_solve_in_a_kept_program_raises_the_package_error(tmp_path, monkeypatch):
+    # The kept programs run equinox's checks as NaN; a solve that fails there (here the step budget) must end
+    # in the package's own error, as with the checks raising, and soon: the backward solve of a failed forward
+    # spans no time (before, it spent its own budget on NaN: issue 32's CLI hang).
+    monkeypatch.delenv("FFR_JAX_NO_CACHE", raising=False)
+    monkeypatch.setenv("FFR_JAX_CACHE_DIR", str(tmp_path))
+    case = fj.cases.slider_crank(4, 2, 2, 0.1)
+    with pytest.raises(fj.SimulationError, match="maximum number of solver steps"):
+        fj.value_and_grad(case, case.initial_design(0.5), "adjoint", max_steps=20)
+    assert list((tmp_path / "programs").glob("*.jaxexport")), "the gradient went through the kept programs"

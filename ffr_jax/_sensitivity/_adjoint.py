@@ -446,8 +446,11 @@ class Adjoint(AbstractSensitivity):
             return solution, terminal
         jumps = problem.jump_ts
         controller = diffrax.PIDController(rtol=self.rtol, atol=self.atol, jump_ts=jnp.asarray(jumps) if jumps else None)
+        # Where the forward solve failed (its values NaN: equinox's `nan` error mode of the cacheable programs), the
+        # backward solve spans no time instead of spending its step budget on NaN; the caller reports the failure.
+        t_end = jnp.where(jnp.isfinite(forward.psi), problem.t0, problem.t1)
         solution = diffrax.diffeqsolve(
-            diffrax.ODETerm(field), solver, problem.t1, problem.t0, None if problem.dt0 is None else -problem.dt0, state1,
+            diffrax.ODETerm(field), solver, problem.t1, t_end, None if problem.dt0 is None else -problem.dt0, state1,
             stepsize_controller=controller, saveat=diffrax.SaveAt(t1=True, dense=not in_ode),
             max_steps=max_steps, adjoint=diffrax.RecursiveCheckpointAdjoint(),
         )

@@ -61,7 +61,7 @@ import jax.numpy as jnp
 
 from .._dynamics._case import Case
 from .._errors import clean_errors
-from ._base import AbstractSensitivity
+from ._base import AbstractSensitivity, psi_of
 from ._finite_differences import FiniteDifferences
 
 try:  # where equinox reads its error mode when a check is traced (equinox 0.11 - 0.13)
@@ -223,6 +223,12 @@ def _scene_gradient_of(problem, scene, method, options):
     return method.value_and_grad_scene(problem, scene, rtol=rtol, atol=atol, solver=solver, max_steps=max_steps)
 
 
+def _psi_of_scene(problem, scene, options):
+    """`psi` of the problem with `scene` (the forward solve alone)."""
+    rtol, atol, solver, max_steps = options
+    return psi_of(problem.with_scene(scene), rtol=rtol, atol=atol, solver=solver, max_steps=max_steps, adjoint=None)
+
+
 @clean_errors
 @eqx.filter_jit
 def _raising(function, *args):
@@ -279,6 +285,10 @@ class _Gradient(eqx.Module):
             _raising(_scene_of, case, x)
         psi, *g_leaves = self.gradient.compiled(*_leaves((case.problem, scene, method, options)))
         if not (_finite(psi) and _finite(g_leaves)):
+            # A check failed: the forward solve alone with the checks raising first (most failures are its own:
+            # the step budget, a dead point, a NaN integrand; it compiles in a fraction of the gradient's time),
+            # then the whole gradient.
+            _raising(_psi_of_scene, case.problem, scene, options)
             _raising(_scene_gradient_of, case.problem, scene, method, options)
             raise FloatingPointError("The objective or its gradient is not finite, and no check of the package "
                                      "fired: rerun with FFR_JAX_NO_CACHE=1 and report the case.")

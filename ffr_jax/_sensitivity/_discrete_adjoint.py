@@ -131,7 +131,8 @@ class DiscreteAdjoint(AbstractSensitivity):
         ts, starts = dense.ts, dense.infos["y0"]
         # A failed solve's step count is the largest integer in equinox's `nan` error mode (the cacheable programs):
         # the loop is bounded by the buffer, never by that count (issue 32: an endless loop after the step budget).
-        n_steps = jnp.minimum(dense.ts_size - 1, ts.shape[0] - 1)
+        # A count past the buffer is that of a failed solve: no step then (its error is reported by the caller).
+        n_steps = jnp.where(dense.ts_size > ts.shape[0], 0, dense.ts_size - 1)
         state_template = jtu.tree_map(lambda a: a[0], starts)
         u_template, unravel_u = jax.flatten_util.ravel_pytree(state_template)
         dtype = u_template.dtype

@@ -81,7 +81,8 @@ def backward_on_forward_grid(solver: AbstractRosenbrock, forward_dense, field, a
     max_steps = ts.shape[0] - 1
     # A failed solve's step count is the largest integer in equinox's `nan` error mode (the cacheable programs):
     # the loop is bounded by the buffer, never by that count (issue 32: an endless loop after the step budget).
-    n_steps = jnp.minimum(forward_dense.ts_size - 1, max_steps)
+    # A count past the buffer is that of a failed solve: no step then (its error is reported by the caller).
+    n_steps = jnp.where(forward_dense.ts_size - 1 > max_steps, 0, forward_dense.ts_size - 1)
     mu1, w1 = state1
     f = mu1.shape[0]
     n = 2 * f
