@@ -210,14 +210,15 @@ def _route(target, method, solver, rtol, atol):
 
 # --- public functions -------------------------------------------------------------------------
 @clean_errors
-def simulate(target, x: DesignsInput | None = None, *_legacy, solver: diffrax.AbstractSolver | None = None,
+def simulate(target, x=None, *_legacy, solver: diffrax.AbstractSolver | None = None,
              rtol: float = 1e-10, atol: float = 1e-12, ts=None, dense: bool = False, max_steps: int = 1_000_000,
              adjoint: diffrax.AbstractAdjoint | None = None, dt0: float | None = None, **_legacy_kwargs) -> Trajectory:
     """Simulate a [`Problem`][ffr_jax.Problem], or a case at design `x`: `simulate(problem)`,
     `simulate(case, x)`.
 
     **Arguments:**
-    - `target`: a [`Problem`][ffr_jax.Problem], or a case; `x`: the case's design (not for a problem).
+    - `target`: a [`Problem`][ffr_jax.Problem], or a case; `x`: the case's design (an array, or a dict of
+      arrays by body; not for a problem).
     - `solver`: any diffrax solver (default `Dopri8()`: the retained modes make the equations
       mildly stiff; on the reference case explicit 5th-order `Tsit5()` needs about 18,000 steps at
       every rtol from 1e-6 to 1e-9, its stability limit, Dopri8 4,700-6,400; benchmarks/RESULTS.md).
