@@ -68,6 +68,14 @@ SLOW_FOR_THE_BUDGET = (
     "tests/test_link_four_bar.py::test_cli_info_knows_the_scene",  # (12 s)
     "tests/test_optimize.py::test_psi_decreases_on_a_tiny_real_case_through_the_cli",  # (11 s)
     "tests/test_design_invariant.py::test_unstructured_rod_gives_the_slider_crank_psi_and_gradient",  # (13 s)
+    # Fourth cut: 357 s with 550 tests after issues 26, 27, 29, 31, 32 (a clean clone of dfe3429, load ~3, with
+    # --durations): these go, each subject still checked by default elsewhere:
+    "tests/test_dynamics.py::test_four_bar_turns_full_circles_on_its_branch",  # (25 s); four-bar dynamics: slow set
+    "tests/test_hard_cases.py::test_crossing_retained_eigenvalues",  # (26 s); test_sensitivity's crossing test stays
+    "tests/test_optimize_defaults.py::test_default_mma_lowers_psi_with_the_volume_held",  # (22 s); test_optimize's MMA
+    "tests/test_solvers.py::test_psi_of_a_small_slider_crank_agrees_with_dopri8",  # (14 s); Rodas orders stay
+    "tests/test_simulation_errors.py::test_partition_regular_away_from_the_dead_point",  # (13 s); the dead-point rows stay
+    "tests/test_stresses.py::test_stresses_along_the_motion_refuse_a_rigid_body_index",  # (7 s); the stress checks stay
 )
 
 
