@@ -139,14 +139,23 @@ def _objective_case_fn(case, x, solver, rtol, atol, max_steps):
     return _simulate_case_fn(case, x, solver, rtol, atol, None, False, max_steps, None).psi
 
 
-def _kept(function, args, what: str, plain):
+def _shape_of(leaf):
+    return jax.ShapeDtypeStruct(leaf.shape, leaf.dtype)
+
+
+def _scalar_like(problem):
+    """A float scalar of the problem's dtype, by its shape (psi)."""
+    return jax.ShapeDtypeStruct((), problem.y0.dtype)
+
+
+def _kept(function, args, what: str, plain, out_like=None):
     """`function(*args)` through a program kept between processes (`_sensitivity/_cached.py`) where the cache
     is on and the arguments are concrete and keyable, else `plain()` (the in-process compiled program)."""
     traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(args))
     directory = None if traced else cache_directory()
     if directory is not None:
         use_persistent_cache(directory)
-        out = kept_call(function, args, directory, what)
+        out = kept_call(function, args, directory, what, out_like)
         if out is not None:
             return out
     return plain()
@@ -295,10 +304,12 @@ def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, ato
         if x is not None:
             raise ValueError("A Problem has no design vector: call objective(problem).")
         return _kept(_objective_problem_fn, (target, solver, rtol, atol, max_steps), "the objective of a problem",
-                     lambda: _simulate_problem(target, solver, rtol, atol, None, False, max_steps, None, None).psi)
+                     lambda: _simulate_problem(target, solver, rtol, atol, None, False, max_steps, None, None).psi,
+                     out_like=_scalar_like(target))
     x = _design(target, x, "objective")
     return _kept(_objective_case_fn, (target, x, solver, rtol, atol, max_steps), "the objective of a case",
-                 lambda: _simulate_case(target, x, solver, rtol, atol, None, False, max_steps, None).psi)
+                 lambda: _simulate_case(target, x, solver, rtol, atol, None, False, max_steps, None).psi,
+                 out_like=_scalar_like(target.problem))
 
 
 @clean_errors
@@ -367,9 +378,12 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
         if check:
             raise ValueError("value_and_grad(problem, check=True): the gradient check differences a design; "
                              "build a Case (problem + design map) to check a design gradient.")
+        # psi and a gradient like the problem (None where a leaf is no float array): known without tracing
+        like = (_scalar_like(problem), jax.tree_util.tree_map(_shape_of, eqx.filter(problem, eqx.is_inexact_array)))
         return _kept(_value_and_grad_problem_fn, (problem, method, rtol, atol, solver, max_steps),
                      f"the gradient of a problem ({detail})",
-                     lambda: _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps, detail=detail))
+                     lambda: _value_and_grad_problem(problem, method, rtol, atol, solver, max_steps, detail=detail),
+                     out_like=like)
     x = _design(target, x, "value_and_grad")
     directory = None if _checks.is_traced(x) or not cacheable(method) else cache_directory()
     result = None if directory is None else _cached(target, x, method, rtol, atol, solver, max_steps, directory, detail)

@@ -421,11 +421,29 @@ class _Kept(eqx.Module):
 _KEPT: dict[str, _Kept] = {}
 
 
-def kept_call(function, args: tuple, directory: pathlib.Path, what: str):
+def _structure(out_like, exported):
+    """`(out_dynamic, out_static)` of `out_like` (the expected output, by its shapes) where its array leaves
+    match the exported program's outputs one for one, else `None`."""
+    if out_like is None or exported is None:
+        return None
+    out_dynamic, out_static = eqx.partition(out_like, _is_array)
+    leaves = jax.tree_util.tree_leaves(out_dynamic)
+    avals = exported.out_avals
+    if len(leaves) != len(avals) or any(tuple(a.shape) != tuple(b.shape) or a.dtype != b.dtype
+                                        for a, b in zip(leaves, avals)):
+        return None
+    return out_dynamic, out_static
+
+
+def kept_call(function, args: tuple, directory: pathlib.Path, what: str, out_like=None):
     """`function(*args)` (outputs: finite arrays) through a program kept in `directory / "programs"`: loaded
     when a process kept it there, else traced with the checks in `nan` mode, exported and kept; `None` where
     the arguments have no key that identifies them across processes (then use the plain compiled path).
-    Says on the package's logger, once per process and program, whether it compiles or loads."""
+    Says on the package's logger, once per process and program, whether it compiles or loads.
+
+    `out_like`: the output's structure with the shapes of its arrays, where the caller knows it without
+    tracing (checked against the loaded program's outputs); else it is found by tracing `function`
+    abstractly, which a loaded program would otherwise be spared."""
     dynamic, static = eqx.partition(args, _is_array)
     leaves, treedef = jax.tree_util.tree_flatten(dynamic)
     shapes = [jax.ShapeDtypeStruct(leaf.shape, leaf.dtype) for leaf in leaves]
@@ -439,9 +457,18 @@ def kept_call(function, args: tuple, directory: pathlib.Path, what: str):
         logger.info("%s %s (first call in this process for these shapes and settings)...",
                     "loading" if loading else "compiling", what)
         start = time.perf_counter()
-        out_dynamic, out_static = eqx.partition(eqx.filter_eval_shape(function, *args), _is_array)
         flat = _flat(function, static, treedef)
         exported = _load(path)
+        structure = _structure(out_like, exported)
+        if structure is None:
+            structure = eqx.partition(eqx.filter_eval_shape(function, *args), _is_array)
+            if out_like is not None and (jax.tree_util.tree_structure(eqx.partition(out_like, _is_array)[0])
+                                         != jax.tree_util.tree_structure(structure[0])):
+                # The caller's structure is not the output's: a later process could not rebuild the output
+                # from it, so nothing is kept (the plain compiled path runs).
+                logger.info("%s: the expected output structure differs from the traced one; not kept", what)
+                return None
+        out_dynamic, out_static = structure
         if exported is None:
             with _checks_as_nan():
                 try:
