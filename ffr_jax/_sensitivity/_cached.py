@@ -296,6 +296,8 @@ class _Gradient(eqx.Module):
         grad = jax.tree_util.tree_unflatten(self.x_treedef, list(self.pullback.compiled(*_leaves((case, x, g_scene)))))
         if not _finite(grad):
             _raising(_pullback_of, case, x, g_scene)
+            raise FloatingPointError("The design gradient is not finite, and no check of the package fired: rerun "
+                                     "with FFR_JAX_NO_CACHE=1 and report the case.")
         return psi, grad
 
 
