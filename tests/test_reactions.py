@@ -10,6 +10,7 @@ import pytest
 import scipy.integrate
 
 import ffr_jax as fj
+from ffr_jax._dynamics import _body_dynamics
 
 # --- an independent transcription of the free rigid slider-crank -----------------------------------
 # Centre-of-mass coordinates q = (x1, y1, th1 | x2, y2, th2 | x3, y3, th3) (ffr_jax uses frames at the
@@ -147,16 +148,16 @@ def _newton_euler_residuals(scene, t, y_r, z_r, a_r, forces):
         y_b, z_b, a_b = (scene.body_coordinates(b, v) for v in (y_r, z_r, a_r))
 
         def first_moment(y):
-            return d.mass * y[:2] + fj._body_dynamics.rotate(y[2], d.first_moment + d.modal_moment @ y[3:])
+            return d.mass * y[:2] + _body_dynamics.rotate(y[2], d.first_moment + d.modal_moment @ y[3:])
 
         velocity = lambda y: jax.jvp(first_moment, (y,), (z_b,))[1]  # noqa: E731
         momentum_rate = jax.jvp(velocity, (y_b,), (z_b,))[1] + jax.jacfwd(first_moment)(y_b) @ a_b
         joint_force = sum((f for (bb, _, f) in points if bb == b), jnp.zeros(2))
         force_residual = momentum_rate - joint_force - scene.body_coordinates(b, applied)[:2]
-        generalized = fj._body_dynamics.body_mass_matrix(d, y_b) @ a_b - scene.body_coordinates(b, h)
+        generalized = _body_dynamics.body_mass_matrix(d, y_b) @ a_b - scene.body_coordinates(b, h)
         for bb, marker, f in points:
             if bb == b:
-                generalized -= jax.jacfwd(lambda y: fj._body_dynamics.marker_position(d, marker, y))(y_b).T @ f
+                generalized -= jax.jacfwd(lambda y: _body_dynamics.marker_position(d, marker, y))(y_b).T @ f
         for bb, tau in torques:
             if bb == b:
                 generalized = generalized.at[2].add(-tau)
