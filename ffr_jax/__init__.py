@@ -93,6 +93,7 @@ from ._app._driver import ConstraintViolationWarning as ConstraintViolationWarni
 from ._app._step_error import StepBackOffWarning as StepBackOffWarning
 from ._optimize._frequency import FrequencyConstraint as FrequencyConstraint
 from ._optimize._function_constraint import FunctionConstraint as FunctionConstraint
+from ._optimize._grey import grey_share as grey_share
 from ._app._history import History as History
 from ._optimize._mass import MassConstraint as MassConstraint
 from ._optimize._mma import MMA as MMA

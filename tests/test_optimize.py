@@ -407,7 +407,8 @@ def test_resumed_run_repeats_the_uninterrupted_iterates(tmp_path, name, projecte
         np.testing.assert_array_equal(resumed.constraints, whole.constraints, err_msg="constraints at the end")
     np.testing.assert_array_equal(resumed.x, whole.x, err_msg="final design")
     for got, expected, quantity in zip(resumed.history, whole.history,
-                                       ("psi", "volume", "max change", "constraints", "names"), strict=True):
+                                       ("psi", "volume", "max change", "constraints", "names", "grey share"),
+                                       strict=True):
         np.testing.assert_array_equal(got, expected, err_msg=f"history of {quantity}")
     for got, expected in zip(jax.tree.leaves(resumed.opt_state), jax.tree.leaves(whole.opt_state), strict=True):
         np.testing.assert_array_equal(got, expected, err_msg="optimizer state")
@@ -531,7 +532,8 @@ def test_a_killed_run_resumes_with_every_constraint_history(tmp_path):
     whole = run(tmp_path / "whole", "mma", 12, extra=True, every=2)
     np.testing.assert_array_equal(resumed.x, whole.x, err_msg="final design")
     for got, expected, quantity in zip(resumed.history, whole.history,
-                                       ("psi", "volume", "max change", "constraints", "names"), strict=True):
+                                       ("psi", "volume", "max change", "constraints", "names", "grey share"),
+                                       strict=True):
         np.testing.assert_array_equal(got, expected, err_msg=f"history of {quantity}")
     assert resumed.history.names == ("volume", "mass", "spread")
     assert (tmp_path / "cut" / "log.csv").read_text() == (tmp_path / "whole" / "log.csv").read_text()

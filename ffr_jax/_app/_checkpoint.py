@@ -64,6 +64,7 @@ def save_checkpoint(path, checkpoint: Checkpoint) -> None:
         "history_volume": np.asarray(checkpoint.history.volume),
         "history_change": np.asarray(checkpoint.history.change),
         "history_constraints": np.asarray(checkpoint.history.constraint_values),
+        "history_grey": np.asarray(checkpoint.history.grey_values),
         "constraint_names": np.array(json.dumps(list(checkpoint.history.names))),
         "config": np.array(json.dumps(checkpoint.config, sort_keys=True)),
         **({} if checkpoint.fingerprint is None else
@@ -125,8 +126,8 @@ def load_checkpoint(path, design_bounds: tuple[float, float] = (0.0, 1.0)) -> Ch
         names = tuple(json.loads(str(arrays["constraint_names"]))) if "constraint_names" in arrays else ()
         constraints = arrays.get("history_constraints", np.zeros((iteration, 0)))
         history = History(arrays["history_value"], arrays["history_volume"], arrays["history_change"],
-                          constraints, names)
-        lengths = [len(h) for h in history[:4]]
+                          constraints, names, arrays.get("history_grey", np.full(iteration, np.nan)))
+        lengths = [len(h) for h in (*history[:4], history.grey)]
         if not all(n == iteration for n in lengths) or constraints.shape != (iteration, len(names)):
             raise ValueError(f"the history has {lengths} entries ({constraints.shape} constraint values for "
                              f"{len(names)} constraints) for {iteration} iterations")

@@ -14,6 +14,7 @@ from ._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_ca
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
 from .._optimize._mma import DEFAULT_MOVE
+from .._optimize._projection import DEFAULT_BETA_EVERY, DEFAULT_BETA_MAX, DEFAULT_BETA_START
 
 # Settings that define a run: stored in its checkpoints, taken from there on --resume.
 _DEFAULTS = {
@@ -26,6 +27,7 @@ _DEFAULTS = {
     "mass_max": 0.0,
     "stop_change": 0.0,
     "filter_radius": 1.5,
+    "filter_length": None,  # a radius in the mesh's length unit instead (the same layout on a finer mesh)
     "method": "adjoint",
     "nx": None,  # the scene's settings: None takes the scene's default (ffr_jax._cli_scenes)
     "ny": None,
@@ -34,9 +36,9 @@ _DEFAULTS = {
     "t1": None,
     "rtol": 1e-8,
     "atol": None,
-    "beta": 0.0,
-    "beta_max": 32.0,
-    "beta_every": 20,
+    "beta": None,  # the optimizer's: the default continuation with mma (fj.optimize's), no projection otherwise
+    "beta_max": DEFAULT_BETA_MAX,
+    "beta_every": DEFAULT_BETA_EVERY,
     "eta": 0.5,
     "volume_per_body": None,
 }
@@ -86,11 +88,16 @@ def add_optimize_parser(sub) -> None:
                    help="stop once no variable changes by more than this in a step (default 0 = run all --iters)")
     p.add_argument("--filter-radius", type=float,
                    help="density filter radius in element sizes, 0 = off (default 1.5)")
+    p.add_argument("--filter-length", type=float, metavar="M",
+                   help="density filter radius in m instead of --filter-radius: the same length scale, and so the "
+                        "same layout, on a finer mesh")
     p.add_argument("--projection-beta", dest="beta", type=float,
-                   help="Heaviside projection of the filtered densities, starting sharpness beta_0 (default 0 = "
-                        "no projection); beta doubles every --beta-every steps up to --beta-max")
+                   help="Heaviside projection of the filtered densities, starting sharpness beta_0; beta doubles "
+                        "every --beta-every steps up to --beta-max (default: 1 with --optimizer mma, as fj.optimize "
+                        "does for a projected objective, so that the run ends near a 0/1 design; 0 = no projection, "
+                        "the default of adam and oc)")
     p.add_argument("--beta-max", type=float, help="largest projection sharpness (default 32)")
-    p.add_argument("--beta-every", type=int, help="steps between doublings of beta (default 20)")
+    p.add_argument("--beta-every", type=int, help="steps between doublings of beta (default 10)")
     p.add_argument("--projection-eta", dest="eta", type=float, help="projection threshold eta (default 0.5)")
     p.add_argument("--method", choices=sorted(METHODS),
                    help="sensitivity method (default adjoint)")
@@ -166,9 +173,19 @@ def _check_bounds(settings: dict) -> None:
                 advice="It is MMA's largest change of a density per step.")
 
 
+def _default_beta(s: dict, stored: set, resume: bool) -> float:
+    """The projection's starting sharpness when --projection-beta is not given: the default continuation of
+    fj.optimize with MMA, none with adam and oc (and none for a resumed run stored before the setting existed)."""
+    if s["beta"] is not None:
+        return s["beta"]
+    if resume and "beta" not in stored:
+        return 0.0
+    return DEFAULT_BETA_START if s["optimizer"] == "mma" else 0.0
+
+
 @functools.cache
 def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | None, method: str,
-             rtol: float, atol: float):
+             rtol: float, atol: float, filter_length: float | None = None):
     """`(case, filter, projection, objective)` of a setting, built once per process.
 
     Runs in one process with the same case and objective settings (tests, notebooks, a resumed run
@@ -186,7 +203,8 @@ def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | Non
                                  float(settings["t1"]))
     else:
         case = make_case(scene, settings)
-    filt = DensityFilter(case.design, filter_radius)
+    filt = (DensityFilter(case.design, filter_radius) if filter_length is None
+            else DensityFilter(case.design, filter_length, scale=(1.0, 1.0)))
     projection = None if eta is None else HeavisideProjection(eta, x_min=case.material.x_min)
     fun = make_objective(case, method, filter=filt, projection=projection, rtol=rtol, atol=atol)
     return case, filt, projection, fun
@@ -231,6 +249,7 @@ def _run_command(args: argparse.Namespace) -> int:
 
     from ._plot_optimize import plot_design, plot_history
     from .._optimize._frequency import FrequencyConstraint
+    from .._optimize._grey import grey_share
     from .._optimize._mass import MassConstraint
     from .._optimize._mma import MMA
     from .._optimize._objective import physical_densities
@@ -240,21 +259,29 @@ def _run_command(args: argparse.Namespace) -> int:
 
     directory, s, stored = _settings(args)
     if s["case"] == "four-bar-two-links":
+        s["beta"] = 0.0 if s["beta"] is None else s["beta"]  # no projection of a dict design from the shell
         optimize_options(s, args, directory, resume=args.resume is not None)
         config = {key: value for key, value in s.items() if key in stored or value != _DEFAULTS.get(key)}
         return _run_two_links(args, directory, s, config)
     if s["volume_per_body"] is not None:
         raise ValueError(f"--volume-per-body is for a scene with several designed bodies; {s['case']} designs one.")
     s.update(scene_settings(s["case"], s))
+    s["beta"] = _default_beta(s, stored, args.resume is not None)
     optimize_options(s, args, directory, resume=args.resume is not None)
+    if s["filter_length"] is not None:
+        in_interval(s["filter_length"], "--filter-length", 0.0, float("inf"),
+                    advice="It is the filter radius in m (0 = no filter).")
     # Runs stored before a setting existed resume with its default (and keep their stored config).
     config = {key: value for key, value in s.items() if key in stored or value != _DEFAULTS.get(key)}
+    if "beta" not in stored:  # a run stored before beta was a setting: no projection, and none stored
+        config.pop("beta", None)
     # The case's own settings (mesh, modes, t1) key the shared objective; the optimizer and tolerances do not.
     geometry = tuple(sorted((k, v) for k, v in scene_settings(s["case"], s).items()
                             if k not in ("optimizer", "atol")))
     case, filt, projection, fun = _problem(s["case"], geometry, float(s["filter_radius"]),
                                            float(s["eta"]) if s["beta"] > 0.0 else None, s["method"],
-                                           float(s["rtol"]), float(s["atol"]))
+                                           float(s["rtol"]), float(s["atol"]),
+                                           None if s["filter_length"] is None else float(s["filter_length"]))
     beta = None
     if s["beta"] > 0.0:
         beta = beta_continuation(s["beta"], max(s["beta_max"], s["beta"]), every=s["beta_every"])
@@ -276,8 +303,10 @@ def _run_command(args: argparse.Namespace) -> int:
     projected = "" if beta is None else f", Heaviside projection beta {s['beta']} -> {s['beta_max']} (x2 every {s['beta_every']})"
     bounds = "".join(f", {c.name} {'>=' if isinstance(c, FrequencyConstraint) else '<='} "
                      f"{c.minimum if isinstance(c, FrequencyConstraint) else c.bound:g}" for c in constraints[1:])
+    radius = (f"filter radius {s['filter_radius']}" if s["filter_length"] is None
+              else f"filter radius {s['filter_length']:g} m")
     print(f"optimize {describe(s['case'], case)}, "
-          f"V = {s['volume']}{bounds}, {s['optimizer']}, filter radius {s['filter_radius']}{projected}, "
+          f"V = {s['volume']}{bounds}, {s['optimizer']}, {radius}{projected}, "
           f"{args.iters} steps -> {directory}")
     result = optimize(
         fun, case.initial_design(s["volume"]), optimizer, constraints if s["optimizer"] == "mma" else constraint,
@@ -289,7 +318,9 @@ def _run_command(args: argparse.Namespace) -> int:
     # The last iterate was projected onto the volume with the last step's beta.
     beta_last = None if beta is None else beta(max(h.steps - 1, 0))
     x_phys = np.asarray(physical_densities(result.x, filt, projection, beta_last))
+    grey = float(grey_share(x_phys))
     np.savez(directory / "design.npz", x=np.asarray(result.x), x_phys=x_phys, psi=h.value, volume=h.volume,
+             grey=np.array(grey), grey_history=h.grey_values,
              max_change=h.change, beta=np.array(np.nan if beta_last is None else beta_last),
              config=np.array(json.dumps(s, sort_keys=True)), constraint_names=np.array(json.dumps(list(h.names))),
              constraint_history=h.constraint_values, constraints=np.asarray(result.constraints))
@@ -300,6 +331,8 @@ def _run_command(args: argparse.Namespace) -> int:
     ax.figure.savefig(directory / "convergence.png", dpi=150)
     if h.steps:
         print(f"psi {h.value[0]:.6e} -> {h.value[-1]:.6e} over {h.steps} steps, volume {h.volume[-1]:.6f}")
+    print(f"grey share of the final design (0.1 < x_phys < 0.9): {100 * grey:.1f} %"
+          + ("" if beta_last is None else f" at beta {beta_last:g}"))
     for line in result.descriptions:
         print(f"  constraint at the final design: {line}")
     if not result.feasible:
@@ -314,12 +347,13 @@ def _run_two_links(args: argparse.Namespace, directory: Path, s: dict, config: d
     from ._plot_optimize import plot_designs, plot_history
     from .._design.filter import DensityFilter
     from .._optimize._mma import MMA
+    from .._optimize._grey import grey_share
     from .._optimize._objective import make_objective, physical_densities
     from .._optimize._pytree import OnBody
     from .._optimize._volume import VolumeConstraint
 
-    unsupported = [f"--{key.replace('_', '-')}" for key in ("frequency_min", "mass_max", "beta")
-                   if s[key] != _DEFAULTS[key]]
+    unsupported = [f"--{key.replace('_', '-')}" for key in ("frequency_min", "mass_max", "beta", "filter_length")
+                   if s[key] not in (None, 0.0)]
     if s["optimizer"] != "mma":
         unsupported.append(f"--optimizer {s['optimizer']} (a dict design needs mma)")
     if unsupported:
@@ -357,12 +391,14 @@ def _run_two_links(args: argparse.Namespace, directory: Path, s: dict, config: d
              **{f"x_{name}": np.asarray(result.x[name]) for name in names},
              **{f"x_phys_{name}": x_phys[name] for name in names})
     volume_text = ", ".join(f"{name} {x_phys[name].mean():.3f}" for name in names)
+    grey = float(grey_share(x_phys))
     fig = plot_designs(case, x_phys, title=f"four-bar-two-links, mma, {bound}, {h.steps} steps")
     fig.savefig(directory / "design.png", dpi=150)
     ax = plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)
     if h.steps:
         print(f"psi {h.value[0]:.6e} -> {h.value[-1]:.6e} over {h.steps} steps, mean density {volume_text}")
+    print(f"grey share of the final design (0.1 < x_phys < 0.9, both rods): {100 * grey:.1f} %")
     for line in result.descriptions:
         print(f"  constraint at the final design: {line}")
     print(f"wrote {directory}/design.npz, design.png, convergence.png, log.csv, {CHECKPOINT}")

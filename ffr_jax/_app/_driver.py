@@ -20,7 +20,7 @@ from ._checkpoint import Checkpoint, CheckpointError, load_checkpoint, restore_o
 from .._optimize._fingerprint import tree_fingerprint
 from ._history import History
 from ._progress import Progress
-from .._optimize._projection import _check_beta
+from .._optimize._projection import _check_beta, beta_continuation
 from .._optimize._constraint import AbstractDesignConstraint
 from .._optimize._pytree import Raveled, is_flat, raveled_objective
 from ._run_lock import RunLock
@@ -46,6 +46,8 @@ class OptimizeResult(NamedTuple):
     - `feasible`: whether every `g_i <= feasibility_tolerance` at the final design.
     - `back_offs`: how many MMA updates were redone with a halved move limit because the design
       they produced could not be simulated (0 in a run whose steps all went through).
+    - `grey`: the [`grey_share`][] of the final design, the share of its elements with
+      `0.1 < x_phys < 0.9` (`history.grey[-1]`; NaN without a [`VolumeConstraint`][] or without a step).
     """
 
     x: jax.Array
@@ -56,6 +58,7 @@ class OptimizeResult(NamedTuple):
     descriptions: tuple[str, ...] = ()
     feasible: bool = True
     back_offs: int = 0
+    grey: float = float("nan")
 
 
 def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int, directory=None,
@@ -113,7 +116,11 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
     - `beta`: the sharpness of the constraints' and `fun`'s [`HeavisideProjection`][], if they
       have one: a number, or a schedule `k -> beta_k` such as [`beta_continuation`][] (step `k`
       runs with `beta_k`; the start design is projected with `beta_0`). A schedule is a function
-      of `k` alone, so a resumed run repeats the uninterrupted one.
+      of `k` alone, so a resumed run repeats the uninterrupted one. Left out while the objective
+      ([`make_objective`][] with `projection=`) or a constraint has a projection, the run takes the
+      default continuation `fj.beta_continuation()` (1, 2, 4, ..., 32, doubled every 10 steps), the
+      same as `ffr-jax optimize --optimizer mma`, so that a long enough run ends with a 0/1 design
+      (the history's and the result's `grey` say how close it came).
     - `stop_change`: stop early once a step changes no variable by more than this (top88's 0.01);
       the test looks at the logged history only, so a resumed run stops where the uninterrupted
       one did.
@@ -154,6 +161,8 @@ def _optimize(fun, x0, optimizer, constraints, *, iterations, directory, resume,
     config.pop(FINGERPRINT, None)  # the driver's own entry, which `_save` stores beside the config
     objective_print = getattr(fun, "fingerprint", None)  # set by make_objective; None for a user's function
     design_size = getattr(fun, "design_size", None)  # likewise: the case's number of densities
+    if beta is None and _has_projection(fun, constraints):
+        beta = beta_continuation()
     beta_of = _beta_schedule(beta)
     unravel = None
     if not is_flat(x0):  # a design of several bodies: one flat vector inside the loop
@@ -221,6 +230,7 @@ def _optimize(fun, x0, optimizer, constraints, *, iterations, directory, resume,
                 try:
                     x_new, state_new, info = step(x, opt_state, beta_of(k))
                     value, volume, change = float(info.value), float(info.volume), float(info.change)
+                    grey = float(info.grey)
                     g = np.asarray(info.constraints, dtype=float)
                     break
                 except (FFRJaxError, eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, ValueError) as err:
@@ -246,7 +256,7 @@ def _optimize(fun, x0, optimizer, constraints, *, iterations, directory, resume,
             _check_finite(k, value, g, names, x_new, history.steps)
             previous = (x, opt_state)  # step k's start, for redoing its update if x_{k+1} fails
             x, opt_state = x_new, state_new
-            history = history.append(value, volume, change, g)
+            history = history.append(value, volume, change, g, grey)
             if log is not None:
                 log.write(_log_row(k, value, volume, change, g))
                 log.flush()
@@ -254,13 +264,15 @@ def _optimize(fun, x0, optimizer, constraints, *, iterations, directory, resume,
                     _save(directory, k + 1, x, opt_state, history, config)
             if callback is not None:
                 callback(k, x, info)
-            bar.update(k + 1, _postfix(value, volume, change, g))
+            bar.update(k + 1, _postfix(value, volume, change, g, grey))
     finally:
         if log is not None:
             log.close()
         bar.close()
     result = _finish(x, opt_state, history, constraints, names, beta_of(max(history.steps - 1, 0)),
                      feasibility_tolerance)._replace(back_offs=back_offs)
+    if history.steps:
+        result = result._replace(grey=float(history.grey_values[-1]))
     return result if unravel is None else result._replace(x=unravel(result.x))
 
 
@@ -306,10 +318,12 @@ def _check_finite(k, value, g, names, x_new, saved_steps):
         )
 
 
-def _postfix(value, volume, change, g) -> str:
+def _postfix(value, volume, change, g, grey=math.nan) -> str:
     text = f"psi {value:.4e}"
     if not math.isnan(volume):
         text += f" V {volume:.4f}"
+    if not math.isnan(grey):
+        text += f" grey {100 * grey:.1f}%"
     if g.size:
         text += f" max g {g.max():+.2e}"
     return text + f" change {change:.2e}"
@@ -326,6 +340,21 @@ def _check_design_size(design_size, x) -> None:
             f"The start design x0 has {x.size} densities, but the objective's case has {design_size}: x0 must be a "
             "design of the case the objective was made from (e.g. case.initial_design(0.5))."
         )
+
+
+def _has_projection(fun, constraints) -> bool:
+    """Whether the objective ([`make_objective`][] records its projection) or a constraint (inside
+    `OnBody`/`Raveled`) has a Heaviside projection, and so needs a `beta`."""
+    if getattr(fun, "projection", None) is not None:
+        return True
+    if isinstance(constraints, AbstractDesignConstraint):
+        constraints = (constraints,)
+    for c in constraints or ():
+        while hasattr(c, "constraint"):
+            c = c.constraint
+        if getattr(c, "projection", None) is not None:
+            return True
+    return False
 
 
 def _beta_schedule(beta) -> Callable:

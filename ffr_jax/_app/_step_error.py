@@ -62,16 +62,12 @@ def redo_smaller(make_step, optimizer, constraints, previous, beta, history, hal
     """
     import numpy as np
 
-    from ._history import History
-
     if halvings > MAX_HALVINGS:
         raise type(reason)(f"{reason} (The update of step {k - 1} was redone {MAX_HALVINGS} times with the move "
                            f"limit halved each time, down to {optimizer.move / 2 ** MAX_HALVINGS:g}, and its design "
                            "still could not be simulated.)") from None
     smaller = optimizer.with_move(optimizer.move / 2**halvings)
     x, state, info = make_step(smaller, constraints)(*previous, beta)
-    kept = History(history.value[:-1], history.volume[:-1], history.change[:-1], history.constraint_values[:-1],
-                   history.names)
-    history = kept.append(float(info.value), float(info.volume), float(info.change),
-                          np.asarray(info.constraints, dtype=float))
+    history = history.drop_last().append(float(info.value), float(info.volume), float(info.change),
+                                         np.asarray(info.constraints, dtype=float), float(info.grey))
     return x, state, history

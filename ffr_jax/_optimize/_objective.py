@@ -128,6 +128,7 @@ def make_objective(case: Case | OperatingConditions, method: str | AbstractSensi
     # What defines this objective, for the checkpoints of fj.optimize: a resume of a run made with
     # another case, mesh, filter, projection, method or tolerance is refused.
     out.fingerprint = tree_fingerprint((case, filter, projection, method, tuple(sorted(kwargs.items()))))
+    out.projection = projection  # fj.optimize takes its default beta continuation when there is one
     out.design_size = (case.case if isinstance(case, OperatingConditions) else case).n_design  # checked by optimize
     # A case's objective runs its own compiled programs (fj.value_and_grad: compiled once, and kept between
     # processes for a concrete design), so make_step calls it as it is instead of tracing it into a program of

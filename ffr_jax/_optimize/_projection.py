@@ -84,15 +84,24 @@ def _check_beta(beta, where: str) -> float:
     return value
 
 
-def beta_continuation(start: float, stop: float, every: int, factor: float = 2.0) -> Callable[[int], float]:
+# The default continuation of fj.optimize (a projected objective without `beta`) and of `ffr-jax optimize
+# --optimizer mma`: beta 1, 2, 4, 8, 16, 32 from step 50 on. At beta = 32 only filtered densities within
+# atanh(0.8) / 32 = 0.034 of eta project into the grey band 0.1 < x_phys < 0.9.
+DEFAULT_BETA_START, DEFAULT_BETA_MAX, DEFAULT_BETA_EVERY = 1.0, 32.0, 10
+
+
+def beta_continuation(start: float = DEFAULT_BETA_START, stop: float = DEFAULT_BETA_MAX,
+                      every: int = DEFAULT_BETA_EVERY, factor: float = 2.0) -> Callable[[int], float]:
     """A continuation schedule for the projection sharpness: `beta_k = min(stop, start factor^floor(k / every))`.
 
     A pure function of the iteration `k`, so a resumed run uses the same `beta_k` as an
-    uninterrupted one.
+    uninterrupted one. Its defaults (1, 2, 4, ..., 32, doubled every 10 steps) are what
+    [`optimize`][] takes for a projected objective given no `beta`, and what `ffr-jax optimize
+    --optimizer mma` uses (`--projection-beta 1 --beta-max 32 --beta-every 10`).
 
     **Arguments:**
-    - `start`: `beta_0 > 0`; `stop`: the largest `beta` (`>= start`).
-    - `every`: iterations between raises (`>= 1`); `factor`: multiplier per raise (`> 1`).
+    - `start`: `beta_0 > 0` (default 1); `stop`: the largest `beta` (`>= start`, default 32).
+    - `every`: iterations between raises (`>= 1`, default 10); `factor`: multiplier per raise (`> 1`).
 
     **Returns:** `schedule(k) -> beta_k` (a Python float).
 

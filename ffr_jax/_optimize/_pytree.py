@@ -63,6 +63,10 @@ class OnBody(AbstractDesignConstraint):
         """The volume fraction of the body (when the constraint is a volume)."""
         return self.constraint.fraction(self._part(x), beta)
 
+    def physical(self, x, beta=None):
+        """The body's physical densities (when the constraint is a volume)."""
+        return self.constraint.physical(self._part(x), beta)
+
     @property
     def is_volume(self) -> bool:
         return hasattr(self.constraint, "fraction")
@@ -87,6 +91,9 @@ class Raveled(AbstractDesignConstraint):
 
     def fraction(self, x, beta=None):
         return self.constraint.fraction(self.unravel(x), beta)
+
+    def physical(self, x, beta=None):
+        return self.constraint.physical(self.unravel(x), beta)
 
     def describe(self, g: float) -> str:
         return self.constraint.describe(g)

@@ -10,6 +10,7 @@ import optax
 from jaxtyping import Array, Float
 
 from ._constraint import AbstractDesignConstraint
+from ._grey import grey_share
 from ._optimizer import AbstractOptimizer, ProjectedOptax
 from ._pytree import OnBody, Raveled
 from ._volume import VolumeConstraint
@@ -24,12 +25,16 @@ class StepInfo(NamedTuple):
     - `change`: `max_e |x_new_e - x_e|`.
     - `constraints`: `(m,)` the normalised constraint values `g_i` at the design the step started
       from (empty for Adam and OC, which hold the volume by projection).
+    - `grey`: the [`grey_share`][] of the new design's physical densities as the volume constraint sees
+      them (`H x_new`, or `P_beta(H x_new)` when projected): the share of its elements with
+      `0.1 < x_phys < 0.9` (NaN when the run has no [`VolumeConstraint`][]).
     """
 
     value: Float[Array, ""]
     volume: Float[Array, ""]
     change: Float[Array, ""]
     constraints: Float[Array, " m"]
+    grey: Float[Array, ""] | float = float("nan")
 
 
 def as_optimizer(optimizer, constraints) -> tuple[AbstractOptimizer, tuple[AbstractDesignConstraint, ...]]:
@@ -129,7 +134,8 @@ def _advance(x, state, value, grad, beta, *, rule):
     g, dg = evaluate_constraints(constraints, x, beta)
     x_new, state = optimizer.update(x, state, value, grad, g, dg, beta)
     fraction = jnp.full((), jnp.nan, x.dtype) if volume is None else volume.fraction(x_new, beta)
-    info = StepInfo(value=value, volume=fraction, change=jnp.max(jnp.abs(x_new - x)), constraints=g)
+    grey = jnp.full((), jnp.nan, x.dtype) if volume is None else grey_share(volume.physical(x_new, beta))
+    info = StepInfo(value=value, volume=fraction, change=jnp.max(jnp.abs(x_new - x)), constraints=g, grey=grey)
     return x_new, state, info
 
 

@@ -92,6 +92,18 @@ class VolumeConstraint(AbstractDesignConstraint):
             return jnp.mean(self.projection(x_filtered, beta))
         return jnp.mean(x if self.weights is None else self.weights * x)
 
+    def physical(self, x: Designs, beta: Scalar | float | None = None) -> Designs:
+        """The physical densities this constraint measures: `x`, `H x` or `P_beta(H x)` (a dict by body for a
+        volume shared by several bodies)."""
+        self._check_beta(beta)
+        if isinstance(self.filter, dict):
+            return {b: self._one_physical(self.filter[b], x[b], beta) for b in sorted(self.filter)}
+        return self._one_physical(self.filter, x, beta)
+
+    def _one_physical(self, filter, x, beta):
+        x_filtered = x if filter is None else filter(x)
+        return x_filtered if self.projection is None else self.projection(x_filtered, beta)
+
     def _shared_fraction(self, x, beta):
         """The area fraction of the physical densities of several bodies (`x` and `filter` dicts by body)."""
         if not isinstance(x, dict) or set(x) != set(self.filter):

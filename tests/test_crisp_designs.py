@@ -1,0 +1,114 @@
+"""Crisp designs (issue 30): the grey share of a design, and the default projection continuation of
+`fj.optimize` with MMA ending in a 0/1 design.
+
+The continuation runs on top88's half MBB beam (a static compliance solved by SciPy: a step costs
+milliseconds, so a whole continuation to beta = 32 fits the default suite) and, under `-m slow`, on a small
+member of the slider–crank family."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ffr_jax as fj
+from ffr_jax._examples._mbb import MBBBeam
+from ffr_jax._optimize._mma import projected_move
+from helpers import small_case
+
+VOLUME = 0.5
+# The issue's acceptance bound for "a short continuation run ends crisp": below 5 % of the elements grey.
+CRISP = 0.05
+
+
+def test_grey_share_counts_the_elements_strictly_inside_the_band():
+    x = jnp.array([0.001, 0.1, 0.1000001, 0.5, 0.8999999, 0.9, 1.0, 0.95])
+    assert float(fj.grey_share(x)) == 3 / 8, "0.1 and 0.9 themselves are not grey"
+    assert float(fj.grey_share(jnp.array([0.001, 1.0, 1.0]))) == 0.0, "a 0/1 design"
+    assert float(fj.grey_share(jnp.full(5, VOLUME))) == 1.0, "the uniform start design"
+    # The area share: the grey element carries 3 of 3 + 1 + 1 units of area.
+    assert float(fj.grey_share(jnp.array([0.5, 1.0, 0.01]), areas=jnp.array([3.0, 1.0, 1.0]))) == 0.6
+    # A design of several bodies: the share over all their elements together.
+    assert float(fj.grey_share({"coupler": jnp.array([0.5, 1.0]), "rocker": jnp.array([0.01, 0.01])})) == 0.25
+    assert float(fj.grey_share(x, low=0.0, high=1.0)) == 7 / 8, "a band of one's own"
+    with pytest.raises(ValueError, match="low < high"):
+        fj.grey_share(x, low=0.9, high=0.1)
+    with pytest.raises(ValueError, match="one area per design element"):
+        fj.grey_share(x, areas=jnp.ones(3))
+
+
+def test_projected_move_limit_bounds_the_physical_change():
+    # The largest slope of P_beta at eta = 0.5 is beta / (2 tanh(beta / 2)) (1.0820 at beta = 1, 16 at beta = 32
+    # to 1e-13); the physical change s * m must stay within 2 * move, and at beta -> 0 (slope 1) nothing is cut.
+    move = 0.2
+    for beta in (1e-3, 1.0, 4.0, 32.0):
+        m = float(projected_move(move, jnp.asarray(beta)))
+        slope = beta / (2.0 * np.tanh(beta / 2.0))
+        assert m <= move and slope * m <= 2.0 * move * (1.0 + 1e-15), f"beta {beta}: move {m}"
+    assert float(projected_move(move, jnp.asarray(1.0))) == move
+    np.testing.assert_allclose(float(projected_move(move, jnp.asarray(32.0))), 2.0 * move / 16.0, rtol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def mbb_run():
+    """The half MBB beam, 24 x 8, filter 1.5 elements, projection, MMA's defaults, and no `beta`: fj.optimize
+    takes its default continuation (1, 2, ..., 32 doubled every 10 steps); 5 steps at beta = 32."""
+    mbb = MBBBeam(24, 8)
+    filt = fj.DensityFilter(mbb.design, 1.5)
+    projection = fj.HeavisideProjection(0.5, x_min=1e-3)
+    fun = fj.filtered_objective(mbb.value_and_grad, filt, projection)
+    volume = fj.VolumeConstraint(VOLUME, x_min=1e-3, filter=filt, projection=projection)
+    x0 = np.full(mbb.nelx * mbb.nely, VOLUME)
+    result = fj.optimize(fun, x0, fj.MMA(1e-3), volume, iterations=55, progress=False)
+    return mbb, filt, projection, result
+
+
+def test_a_short_continuation_run_ends_crisp(mbb_run):
+    mbb, filt, projection, result = mbb_run
+    history = result.history
+    schedule = fj.beta_continuation()
+    # The default schedule reached its cap, and the recorded share is that of the final design's physical
+    # densities at the last step's beta (the same map the run's volume constraint holds).
+    assert schedule(history.steps - 1) == 32.0
+    x_phys = fj.physical_densities(result.x, filt, projection, beta=32.0)
+    assert result.grey == history.grey[-1] == float(fj.grey_share(x_phys))
+    assert history.grey[0] > 0.5, "the first steps are grey (beta = 1): the measure is not trivially 0"
+    assert result.grey < CRISP, f"grey share per step: {np.round(history.grey, 3)}"
+    # The volume bound holds to MMA's subproblem tolerance (epsimin 1e-7 on the normalised constraint) at the
+    # end; no update was redone; the design is far stiffer than the uniform one (a 0/1 beam against
+    # x = 0.5 everywhere, whose stiffness is 0.5^3 of the solid's: its compliance is > 3x a good layout's).
+    assert result.feasible and result.constraints[0] <= 1e-6 and result.back_offs == 0
+    uniform = mbb.compliance_and_grad(np.full(x_phys.shape, VOLUME))[0]
+    assert history.value[-1] < uniform / 3, (history.value[-1], uniform)
+
+
+def test_continuation_run_records_the_grey_share_in_the_checkpoint(tmp_path):
+    # The share is kept with the history in the checkpoint, so a resumed run's history is the whole run's.
+    mbb = MBBBeam(8, 4)
+    filt = fj.DensityFilter(mbb.design, 1.5)
+    projection = fj.HeavisideProjection(0.5, x_min=1e-3)
+    fun = fj.filtered_objective(mbb.value_and_grad, filt, projection)
+    volume = fj.VolumeConstraint(VOLUME, x_min=1e-3, filter=filt, projection=projection)
+    result = fj.optimize(fun, np.full(32, VOLUME), fj.MMA(1e-3), volume, iterations=3, progress=False,
+                         directory=tmp_path, checkpoint_every=1)
+    stored = fj.load_checkpoint(tmp_path / "checkpoint.npz").history
+    np.testing.assert_array_equal(stored.grey, result.history.grey)
+    assert stored.grey.shape == (3,) and np.all((stored.grey >= 0) & (stored.grey <= 1))
+
+
+@pytest.mark.slow
+def test_a_short_continuation_run_on_the_slider_crank_ends_crisp():
+    # slider_crank(8, 4, 2, 0.1): 8 x 2 = 16 design elements (the outer rows are the solid rims), MMA's default
+    # move, beta doubled every 3 steps to 32 at step 15, three steps there. psi falls to 0.2 of the uniform
+    # design's within 12 steps (measured); with 16 elements one grey element is 6 %, so crisp means none.
+    case = small_case(8, 4, 2, 0.1)
+    filt = fj.DensityFilter(case.design, radius=1.5)
+    projection = fj.HeavisideProjection(0.5, x_min=case.material.x_min)
+    fun = fj.make_objective(case, "adjoint", filter=filt, projection=projection, rtol=1e-6, atol=1e-12)
+    volume = fj.VolumeConstraint(VOLUME, x_min=case.material.x_min, filter=filt, projection=projection)
+    result = fj.optimize(fun, case.initial_design(VOLUME), fj.MMA(case.material.x_min), volume, iterations=18,
+                         progress=False, beta=fj.beta_continuation(1.0, 32.0, every=3))
+    psi = result.history.value
+    assert result.grey < CRISP, f"grey share per step: {np.round(result.history.grey, 3)}"
+    # psi falls by half at least (a 0/1 rod against the uniform one; the bound is far above the solves' rtol),
+    # the volume holds (MMA's subproblem tolerance, see above) and no update was redone.
+    assert psi[-1] < 0.5 * psi[0], psi / psi[0]
+    assert result.feasible and result.constraints[0] <= 1e-6 and result.back_offs == 0
