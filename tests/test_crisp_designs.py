@@ -112,3 +112,19 @@ def test_a_short_continuation_run_on_the_slider_crank_ends_crisp():
     # the volume holds (MMA's subproblem tolerance, see above) and no update was redone.
     assert psi[-1] < 0.5 * psi[0], psi / psi[0]
     assert result.feasible and result.constraints[0] <= 1e-6 and result.back_offs == 0
+
+
+@pytest.mark.slow
+def test_cli_mma_projects_by_default_and_reports_the_grey_share(tmp_path, capsys):
+    from ffr_jax._app._cli import main
+
+    # test_optimize.py's tiny CLI case and tolerances (its compiled objective), with MMA and no projection option.
+    assert main(["optimize", "slider-crank", "--nx", "8", "--ny", "2", "--modes", "2", "--t1", "0.2", "--rtol", "1e-6",
+                 "--atol", "1e-12", "--method", "adjoint", "--optimizer", "mma", "--iters", "2", "--no-progress",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "Heaviside projection beta 1.0 -> 32.0 (x2 every 10)" in out, out
+    saved = np.load(tmp_path / "design.npz")
+    grey = float(fj.grey_share(saved["x_phys"]))
+    assert float(saved["grey"]) == grey == saved["grey_history"][-1]
+    assert f"grey share of the final design (0.1 < x_phys < 0.9): {100 * grey:.1f} % at beta 1" in out, out
