@@ -147,7 +147,8 @@ def lu_solve(lu: LU, b, trans: int = 0):
             x = jnp.where((rows == k)[:, None], xk[None, :], x - jnp.where(rows > k, a[k], 0.0)[:, None] * xk[None, :])
         for k in reversed(range(1, n)):  # L^T v = w (unit upper)
             x = x - jnp.where(rows < k, a[k], 0.0)[:, None] * x[k][None, :]
-        x = jnp.zeros_like(x).at[lu.perm].set(x) if n > 1 else x
+        # A permutation: unique indices, so that the solve can be transposed (reverse mode through it).
+        x = jnp.zeros_like(x).at[lu.perm].set(x, unique_indices=True) if n > 1 else x
     return x[:, 0] if vector else x
 
 
