@@ -128,3 +128,24 @@ def test_cli_mma_projects_by_default_and_reports_the_grey_share(tmp_path, capsys
     grey = float(fj.grey_share(saved["x_phys"]))
     assert float(saved["grey"]) == grey == saved["grey_history"][-1]
     assert f"grey share of the final design (0.1 < x_phys < 0.9): {100 * grey:.1f} % at beta 1" in out, out
+
+
+@pytest.mark.slow  # the case build (a few seconds) would cost the default suite's budget
+def test_cli_filter_length_is_a_radius_in_metres(tmp_path, capsys):
+    from ffr_jax._app._cli import main
+    from ffr_jax._app._cli_optimize import _problem
+
+    # The CLI's filter of --filter-length r: the radius measured in the mesh's length unit, scale (1, 1), equal to
+    # fj.DensityFilter(.., r, scale=(1, 1)). On the 8 x 2 rod (elements 0.125 m x 0.03 m) r = 0.05 m reaches the
+    # neighbours across the rod only, unlike the default 1.5 element sizes (the 8 nearest).
+    geometry = (("modes", 2), ("nx", 8), ("ny", 2), ("t1", 0.2))
+    case, filt, _, _ = _problem("slider-crank", geometry, 1.5, None, "adjoint", 1e-6, 1e-12, 0.05)
+    expected = fj.DensityFilter(case.design, 0.05, scale=(1.0, 1.0))
+    np.testing.assert_array_equal(np.asarray(filt.weights), np.asarray(expected.weights))
+    np.testing.assert_array_equal(np.asarray(filt.neighbours), np.asarray(expected.neighbours))
+    in_elements = fj.DensityFilter(case.design, 1.5)
+    assert filt.weights.shape != in_elements.weights.shape or not np.array_equal(filt.weights, in_elements.weights)
+    # A negative length is refused at the door, before anything compiles.
+    assert main(["optimize", "slider-crank", "--nx", "8", "--ny", "2", "--filter-length", "-1",
+                 "--out", str(tmp_path / "bad")]) == 2
+    assert "--filter-length must lie in" in capsys.readouterr().err
