@@ -17,8 +17,8 @@ DEFAULT_MOVE = 0.2
 
 # With a Heaviside projection a step may change a physical density by up to this many move limits (see
 # `projected_move`). Without the cap, the slider-crank family case 8 x 4 with the projection at beta = 32
-# swung from psi/psi_0 = 0.20 to 5.9 and the volume from 0.50 to 0.10 in two updates, each at the move
-# limit; with it, the run held psi/psi_0 = 0.20 and the volume (issue 30).
+# swung from psi/psi_0 = 0.20 to 5.9 in one update and the volume from 0.50 to 0.10 in three, each at the
+# move limit; with it, the run held psi/psi_0 = 0.20 and the volume (issue 30).
 PROJECTED_MOVE_FACTOR = 2.0
 
 
