@@ -48,7 +48,7 @@ def test_projected_move_limit_bounds_the_physical_change():
 
 
 @pytest.fixture(scope="module")
-def mbb_run():
+def mbb_run(tmp_path_factory):
     """The half MBB beam, 24 x 8, filter 1.5 elements, projection, MMA's defaults, and no `beta`: fj.optimize
     takes its default continuation (1, 2, ..., 32 doubled every 10 steps); 5 steps at beta = 32."""
     mbb = MBBBeam(24, 8)
@@ -57,12 +57,14 @@ def mbb_run():
     fun = fj.filtered_objective(mbb.value_and_grad, filt, projection)
     volume = fj.VolumeConstraint(VOLUME, x_min=1e-3, filter=filt, projection=projection)
     x0 = np.full(mbb.nelx * mbb.nely, VOLUME)
-    result = fj.optimize(fun, x0, fj.MMA(1e-3), volume, iterations=55, progress=False)
-    return mbb, filt, projection, result
+    directory = tmp_path_factory.mktemp("mbb")
+    result = fj.optimize(fun, x0, fj.MMA(1e-3), volume, iterations=55, progress=False, directory=directory,
+                         checkpoint_every=55)
+    return mbb, filt, projection, result, directory
 
 
 def test_a_short_continuation_run_ends_crisp(mbb_run):
-    mbb, filt, projection, result = mbb_run
+    mbb, filt, projection, result, _ = mbb_run
     history = result.history
     schedule = fj.beta_continuation()
     # The default schedule reached its cap, and the recorded share is that of the final design's physical
@@ -80,18 +82,12 @@ def test_a_short_continuation_run_ends_crisp(mbb_run):
     assert history.value[-1] < uniform / 3, (history.value[-1], uniform)
 
 
-def test_continuation_run_records_the_grey_share_in_the_checkpoint(tmp_path):
+def test_continuation_run_records_the_grey_share_in_the_checkpoint(mbb_run):
     # The share is kept with the history in the checkpoint, so a resumed run's history is the whole run's.
-    mbb = MBBBeam(8, 4)
-    filt = fj.DensityFilter(mbb.design, 1.5)
-    projection = fj.HeavisideProjection(0.5, x_min=1e-3)
-    fun = fj.filtered_objective(mbb.value_and_grad, filt, projection)
-    volume = fj.VolumeConstraint(VOLUME, x_min=1e-3, filter=filt, projection=projection)
-    result = fj.optimize(fun, np.full(32, VOLUME), fj.MMA(1e-3), volume, iterations=3, progress=False,
-                         directory=tmp_path, checkpoint_every=1)
-    stored = fj.load_checkpoint(tmp_path / "checkpoint.npz").history
+    *_, result, directory = mbb_run
+    stored = fj.load_checkpoint(directory / "checkpoint.npz").history
     np.testing.assert_array_equal(stored.grey, result.history.grey)
-    assert stored.grey.shape == (3,) and np.all((stored.grey >= 0) & (stored.grey <= 1))
+    assert stored.grey.shape == (55,) and np.all((stored.grey >= 0) & (stored.grey <= 1))
 
 
 @pytest.mark.slow
