@@ -215,6 +215,48 @@ def test_driver_power_is_the_rate_of_energy(flexible):
     assert np.max(np.abs(power - rate)) <= BALANCE * scale, f"driver power vs dE/dt: {np.abs(power - rate).max():.3e}"
 
 
+# --- the derivative of the multipliers ----------------------------------------------------------------------
+# `constraint_multipliers` is differentiated as the solution of the augmented system (a custom JVP), not through
+# its formula. Against central differences of the multipliers and accelerations themselves, at a state of the
+# flexible family rod, along one direction in (t, y_r, z_r) and in every float parameter of the scene, each entry
+# moved by its own size times a pattern in [-0.5, 1] (relative step h = 1e-4): truncation h^2 |f'''| ~ 1e-8 |f|
+# (derivatives of relative order one per unit of relative change), plus the round-off of two solves, 2 x 1e-10
+# |f| (SAME_STATE's argument), over 2 h: 1e-6 |f|. 1e-5 of the largest entry. Reverse mode is the transpose of
+# the forward rule: <w, J v> = <J^T w, v> up to the round-off of the sums (1e-12 relative).
+JVP_VS_CENTRAL_DIFFERENCES = 1e-5
+TRANSPOSE = 1e-12
+
+
+def test_multiplier_derivatives_equal_central_differences_and_transpose(flexible):
+    case, x, traj, _, _ = flexible
+    problem = case.problem_for(x)
+    dyn, static = eqx.partition(problem.scene, eqx.is_inexact_array)
+
+    @jax.jit
+    def outputs(s):
+        t, y_r, z_r, d = s
+        return fj.constraint_multipliers(problem.model, t, y_r, z_r, eqx.combine(d, static))
+
+    primal = (traj.ts[2], traj.positions[2], traj.velocities[2], dyn)
+    leaves, treedef = jax.tree_util.tree_flatten(primal)
+    direction = treedef.unflatten([jnp.linspace(1.0, -0.5, a.size).reshape(a.shape) * jnp.abs(a) for a in leaves])
+    values, tangents = jax.jit(lambda s, v: jax.jvp(outputs, (s,), (v,)))(primal, direction)
+    h = 1e-4
+    shifted = [outputs(jax.tree_util.tree_map(lambda a, v: a + sign * h * v, primal, direction)) for sign in (1, -1)]
+    for name, k in (("accelerations", 0), ("multipliers", 1)):
+        fd = (shifted[0][k] - shifted[1][k]) / (2 * h)
+        err = float(jnp.max(jnp.abs(tangents[k] - fd)))
+        assert err <= JVP_VS_CENTRAL_DIFFERENCES * float(jnp.max(jnp.abs(values[k]))), f"JVP of the {name}: {err:.3e}"
+    weights = tuple(jnp.linspace(-1.0, 2.0, v.size) for v in values)
+    (pulled,) = jax.jit(lambda s, w: jax.vjp(outputs, s)[1](w))(primal, weights)
+    left = sum(float(jnp.vdot(w, t)) for w, t in zip(weights, tangents))
+    right = sum(float(jnp.vdot(p, v)) for p, v in zip(jax.tree_util.tree_leaves(pulled), jax.tree_util.tree_leaves(direction)))
+    scale = max(sum(float(jnp.vdot(jnp.abs(w), jnp.abs(t))) for w, t in zip(weights, tangents)),
+                sum(float(jnp.vdot(jnp.abs(p), jnp.abs(v))) for p, v in
+                    zip(jax.tree_util.tree_leaves(pulled), jax.tree_util.tree_leaves(direction))))
+    assert abs(left - right) <= TRANSPOSE * scale, f"<w, J v> = {left:.15e}, <J^T w, v> = {right:.15e}"
+
+
 # --- bad input ------------------------------------------------------------------------------------------
 def test_unknown_joint_and_quantity_are_refused(rigid):
     problem = rigid[0]

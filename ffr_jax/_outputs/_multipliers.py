@@ -8,7 +8,6 @@ import jax.tree_util as jtu
 from .._dynamics._model import MinimalModel, _zeros_for_none
 from .._dynamics._small_linalg import LU, lu_factor, lu_solve, matmul, spd_solve
 from .._scene._scene import Scene
-from ._accelerations import redundant_accelerations
 
 
 def constraint_multipliers(model: MinimalModel, t, y_r, z_r, scene: Scene):
@@ -20,8 +19,8 @@ def constraint_multipliers(model: MinimalModel, t, y_r, z_r, scene: Scene):
 
     `lambda = C_d^-T (h_a - M zdot_r)_d`,
 
-    with `zdot_r = J zdot + gammabar_r` (eq. 13) and `zdot = Mbar^-1 (fbar - gammabar)` (eq. 15), as in
-    [`redundant_accelerations`][]. `-C^T lambda` is the generalized force the joints and drivers exert
+    with `zdot_r = J zdot + gammabar_r` (eq. 13), `J = B[I; -C_d^-1 C_i]`, and `zdot = Mbar^-1 (fbar -
+    gammabar)` (eq. 15). `-C^T lambda` is the generalized force the joints and drivers exert
     on the bodies. A pure function of the state and the scene: every sensitivity method differentiates
     it.
 
@@ -38,7 +37,7 @@ def constraint_multipliers(model: MinimalModel, t, y_r, z_r, scene: Scene):
     """
     t = jnp.asarray(t, dtype=y_r.dtype)
     if not model.partition.dependent:
-        return redundant_accelerations(model, t, y_r, z_r, scene), jnp.zeros((0,), y_r.dtype)
+        return model.accelerations(t, y_r, z_r, scene), jnp.zeros((0,), y_r.dtype)
     return _multipliers(model, t, y_r, z_r, scene)
 
 
