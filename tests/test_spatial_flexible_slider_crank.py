@@ -13,7 +13,12 @@ only, and the two solutions by the solver's error propagation of that round-off.
 - gradient: 1e-6 of the largest entry (issue 26): the adjoint integrates backward at rtol 1e-10 as well, and its
   gradient carries the same relative error, ~1e-8, amplified by the adjoint's error growth.
 Slow: compiling the spatial problem's programs takes minutes on the shared 2-core machine (benchmarks/RESULTS.md,
-"Spatial slider–crank"); the planar ones tens of seconds.
+"Spatial slider–crank"); the planar ones tens of seconds. So the module compiles four programs and shares them:
+the planar case's adjoint design gradient (its `psi` is the planar reference of both comparisons), and for the spatial
+problem at the design, `problem = case.problem_for(x)`, its objective (every central difference, densities and body
+data alike), its adjoint gradient and its autodiff gradient. The spatial design gradient is the adjoint's scene
+gradient pulled back through `p(x)` by one VJP: the composition `fj.value_and_grad(case, x)` performs
+(`AbstractSensitivity.value_and_grad_design`), here without compiling it as a fifth program.
 """
 
 import equinox as eqx
@@ -50,10 +55,36 @@ def cases():
 
 
 @pytest.fixture(scope="module")
-def gradients(cases):
-    planar, spatial, x = cases
-    return {name: fj.value_and_grad(case, x, method="adjoint", rtol=RTOL, atol=ATOL)
-            for name, case in (("planar", planar), ("spatial", spatial))}
+def planar_gradient(cases):
+    planar, _, x = cases
+    return fj.value_and_grad(planar, x, method="adjoint", rtol=RTOL, atol=ATOL)
+
+
+@pytest.fixture(scope="module")
+def spatial_problem(cases):
+    """The spatial problem at the design and the pullback of `p(x)` (`Case.scene`) for its design gradient."""
+    _, spatial, x = cases
+    scene, pullback = eqx.filter_vjp(spatial.scene, x)
+    return spatial.problem.with_scene(scene), pullback
+
+
+def _objective(problem):
+    """`psi` of a spatial problem: one compiled program for every problem of the same structure and shapes."""
+    return fj.objective(problem, rtol=RTOL, atol=ATOL)
+
+
+@pytest.fixture(scope="module")
+def scene_gradient(spatial_problem):
+    problem, _ = spatial_problem
+    return problem, fj.value_and_grad(problem, method="adjoint", rtol=RTOL, atol=ATOL)
+
+
+@pytest.fixture(scope="module")
+def spatial_design_gradient(spatial_problem, scene_gradient):
+    _, pullback = spatial_problem
+    _, (psi, grad) = scene_gradient
+    (g_x,) = pullback(grad.scene)
+    return psi, g_x
 
 
 def test_bad_input_at_the_door():
@@ -81,29 +112,27 @@ def test_spatial_case_is_built_from_spatial_parts(cases):
 
 
 @pytest.mark.slow
-def test_objective_equals_planar(cases):
-    planar, spatial, x = cases
-    psi_p, psi_s = fj.objective(planar, x, rtol=RTOL, atol=ATOL), fj.objective(spatial, x, rtol=RTOL, atol=ATOL)
+def test_objective_equals_planar(spatial_problem, planar_gradient):
+    psi_p, psi_s = planar_gradient[0], _objective(spatial_problem[0])
     assert abs(float(psi_s - psi_p)) <= PSI_RTOL * abs(float(psi_p)), f"psi: spatial {psi_s}, planar {psi_p}"
 
 
 @pytest.mark.slow
-def test_value_and_grad_equals_planar(gradients):
-    (psi_p, g_p), (psi_s, g_s) = gradients["planar"], gradients["spatial"]
+def test_value_and_grad_equals_planar(planar_gradient, spatial_design_gradient):
+    (psi_p, g_p), (psi_s, g_s) = planar_gradient, spatial_design_gradient
     assert abs(float(psi_s - psi_p)) <= PSI_RTOL * abs(float(psi_p)), f"psi: spatial {psi_s}, planar {psi_p}"
     diff = float(jnp.max(jnp.abs(g_s - g_p)))
     assert diff <= GRAD_RTOL * float(jnp.max(jnp.abs(g_p))), f"gradient differs by {diff} (max norm)"
 
 
 @pytest.mark.slow
-def test_design_gradient_matches_central_differences(cases, gradients):
+def test_design_gradient_matches_central_differences(cases, spatial_design_gradient):
     """Along a random direction `d` of the densities: `grad . d` = `(psi(x + h d) - psi(x - h d)) / 2h`."""
     _, spatial, x = cases
-    _, grad = gradients["spatial"]
+    _, grad = spatial_design_gradient
     d = jnp.asarray(np.random.default_rng(5).uniform(-1.0, 1.0, spatial.n_design))
     h = FD_STEP
-    fd = float(fj.objective(spatial, x + h * d, rtol=RTOL, atol=ATOL)
-               - fj.objective(spatial, x - h * d, rtol=RTOL, atol=ATOL)) / (2 * h)
+    fd = float(_objective(spatial.problem_for(x + h * d)) - _objective(spatial.problem_for(x - h * d))) / (2 * h)
     got = float(grad @ d)
     assert abs(got - fd) <= FD_RTOL * float(jnp.sum(jnp.abs(grad))), f"adjoint {got}, central differences {fd}"
 
@@ -124,13 +153,6 @@ def _perturbed(problem, select, entries, delta):
     return eqx.tree_at(select, problem, a)
 
 
-@pytest.fixture(scope="module")
-def scene_gradient(cases):
-    _, spatial, x = cases
-    problem = spatial.problem_for(x)
-    return problem, fj.value_and_grad(problem, method="adjoint", rtol=RTOL, atol=ATOL)
-
-
 @pytest.mark.slow
 def test_body_data_gradient_matches_central_differences(scene_gradient):
     problem, (_, grad) = scene_gradient
@@ -138,8 +160,8 @@ def test_body_data_gradient_matches_central_differences(scene_gradient):
     scale = max(abs(v) for v in derivatives.values())
     for name, select, entries in DIRECTIONS:
         h = FD_STEP * max(abs(sum(float(select(problem)[e]) for e in entries)), 1e-3)
-        fd = float(fj.objective(_perturbed(problem, select, entries, h), rtol=RTOL, atol=ATOL)
-                   - fj.objective(_perturbed(problem, select, entries, -h), rtol=RTOL, atol=ATOL)) / (2 * h)
+        fd = float(_objective(_perturbed(problem, select, entries, h))
+                   - _objective(_perturbed(problem, select, entries, -h))) / (2 * h)
         assert abs(derivatives[name] - fd) <= FD_RTOL * scale, \
             f"d psi / d {name}: adjoint {derivatives[name]}, central differences {fd}"
 

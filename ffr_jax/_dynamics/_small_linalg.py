@@ -16,7 +16,11 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
-UNROLL_MAX = 12
+# 16 rather than 12: the spatial slider-crank's 14 dependent coordinates (rod and driven crank, `R, p` each) made
+# `C_d` a LAPACK matrix, and under `jax.vmap` (the adjoint's quadrature, Jacobians by `jax.jacfwd`) batched LAPACK
+# kernels deadlock XLA's CPU thread pool on a 2-core machine even with the scheduler flag of `_xla_flags` set: both
+# pool threads waited in batched `trsm` at 0 % CPU (tests/test_spatial_flexible_slider_crank.py, 20 minutes, issue 26).
+UNROLL_MAX = 16
 
 
 CLOSED_FORM_MAX = 3
