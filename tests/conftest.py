@@ -23,6 +23,15 @@ from suite_plan import LONGEST_FIRST, SLOW_FOR_THE_BUDGET, group
 # under vmap) is set here for every test (the tests vmap dense modal analyses; import ffr_jax does not set it).
 # (ffr_jax._dynamics._xla_flags.add_flag cannot be imported here: see the module docstring on the import hook.)
 _FLAGS = ["--xla_cpu_enable_concurrency_optimized_scheduler=false"]  # = ffr_jax._dynamics._xla_flags.DEADLOCK_FLAG
+# A second guard, a precaution: jaxlib 0.10.2's LAPACK kernels split a batch over XLA's intra-op thread pool and block
+# waiting for the parts; when the pool's threads all sit in such kernels nothing runs (seen this session: batched trsm
+# and getrf under vmap hung the spatial slider-crank's and a JointLoad test's worker at 0 % CPU, scheduler flag set;
+# probably also why the CI of stop 34 ran past its 90-minute cap). jaxlib 0.11.1 compiles that path out of open-source builds; 0.10.2
+# is the newest on the registry here. Single-threaded Eigen is the workaround other projects report for such pool
+# stalls; it is not shown to prevent this one (no small reproducer), and should cost the suite little (not measured
+# separately): two workers already occupy the two cores. The dependent solves of up to 16 x 16 avoid LAPACK altogether
+# (ffr_jax/_dynamics/_small_linalg.py), the multipliers' derivative too (ffr_jax/_outputs/_multipliers.py).
+_FLAGS += ["--xla_cpu_multi_thread_eigen=false"]
 if not os.environ.get("FFR_JAX_TEST_XLA_DEFAULTS"):
     _FLAGS += ["--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0",
                "--xla_llvm_disable_expensive_passes=true"]
