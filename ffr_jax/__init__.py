@@ -71,6 +71,7 @@ from ._spatial._body_data import SpatialBodyData as SpatialBodyData, spatial_rig
 from ._spatial._euler_parameters import euler_parameter_rates as euler_parameter_rates, euler_parameters as euler_parameters
 from ._spatial._flexible_body_data import SpatialFlexibleBodyData as SpatialFlexibleBodyData, spatial_flexible_body_data as spatial_flexible_body_data
 from ._spatial._lift import lifted_body_data as lifted_body_data
+from ._spatial._solid_body_data import solid_body_data as solid_body_data
 from ._spatial._point_on_line import SpatialPointOnLine as SpatialPointOnLine
 from ._spatial._point_on_plane import SpatialPointOnPlane as SpatialPointOnPlane
 from ._spatial._revolute import SpatialRevolute as SpatialRevolute
