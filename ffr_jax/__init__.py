@@ -66,6 +66,9 @@ from ._scene._revolute import Revolute as Revolute
 from ._scene._scene import Scene as Scene
 from ._scene._spring_damper import SpringDamper as SpringDamper
 from ._scene._stiffening import GeometricStiffening as GeometricStiffening
+from ._scene._spin_up_law import SpinUpLaw as SpinUpLaw
+from ._spatial._stiffening import SpatialGeometricStiffening as SpatialGeometricStiffening
+from ._design.solid_geometric_stiffness import solid_centrifugal_geometric_stiffness as solid_centrifugal_geometric_stiffness
 from ._spatial._angle_driver import EulerNormalisation as EulerNormalisation, SpatialAngleDriver as SpatialAngleDriver
 from ._spatial._body_data import SpatialBodyData as SpatialBodyData, spatial_rigid_body_data as spatial_rigid_body_data
 from ._spatial._euler_parameters import euler_parameter_rates as euler_parameter_rates, euler_parameters as euler_parameters

@@ -6,6 +6,7 @@ from ._four_bar import four_bar as four_bar
 from ._four_bar_two_links import four_bar_two_links as four_bar_two_links
 from ._rigid_slider_crank import rigid_slider_crank as rigid_slider_crank
 from ._spinning_beam import spinning_beam as spinning_beam
+from ._spin_up_beam import spin_up_beam as spin_up_beam
 from ._link_four_bar import link_body as link_body, link_four_bar as link_four_bar
 from ._rod import rod_body as rod_body
 from ._spatial_four_bar import spatial_four_bar as spatial_four_bar
