@@ -10,3 +10,5 @@ from ._spin_up_beam import spin_up_beam as spin_up_beam
 from ._link_four_bar import link_body as link_body, link_four_bar as link_four_bar
 from ._rod import rod_body as rod_body
 from ._spatial_four_bar import spatial_four_bar as spatial_four_bar
+from ._solid_rod import SolidRod as SolidRod, solid_rod as solid_rod
+from ._solid_slider_crank import solid_slider_crank as solid_slider_crank

@@ -38,8 +38,10 @@ def spatial_slider_crank_guess(t, y, scene):
     return jnp.concatenate([pin, _half_turn(-jnp.arcsin(pin[1] / length)), jnp.zeros(3), _half_turn(phi)])
 
 
-def spatial_slider_crank_problem(rod_body, eccentricity: float, law, t1: float) -> Problem:
-    """The [`Problem`][] of `slider_crank(..., spatial=True)` (see there); `rod_body` is the planar designed rod.
+def spatial_slider_crank_problem(rod_body, eccentricity: float, law, t1: float, rod_data=None) -> Problem:
+    """The [`Problem`][] of `slider_crank(..., spatial=True)` (see there); `rod_body` is the planar designed rod
+    (lifted), or `rod_data` the rod's [`SpatialFlexibleBodyData`][] (markers A and B on its x-axis; then `rod_body`
+    is not used).
 
     Bodies: 0 the rod (lifted, coordinates `(R, p, q)`), 1 the crank (rigid, a slender bar of 0.1 kg from the
     hinge to the pin; its motion is prescribed, so its inertia does not enter the rod's motion). Joints: the crank's
@@ -48,7 +50,7 @@ def spatial_slider_crank_problem(rod_body, eccentricity: float, law, t1: float) 
     everything in `z = 0`, so this is the slider on the x-axis; a point-on-line would repeat the hinge's `z`
     equation); the rod's Euler normalisation. Independent coordinates: the rod's `q`, as in the planar case.
     """
-    rod = Body("rod", uniform_lifted_body_data(rod_body))
+    rod = Body("rod", uniform_lifted_body_data(rod_body) if rod_data is None else rod_data)
     mass, radius = 0.1, float(eccentricity)
     crank = Body("crank", spatial_rigid_body_data(
         mass, (mass * radius / 2, 0.0, 0.0),
