@@ -75,6 +75,8 @@ from ._spatial._euler_parameters import euler_parameter_rates as euler_parameter
 from ._spatial._flexible_body_data import SpatialFlexibleBodyData as SpatialFlexibleBodyData, spatial_flexible_body_data as spatial_flexible_body_data
 from ._spatial._lift import lifted_body_data as lifted_body_data
 from ._spatial._solid_body_data import solid_body_data as solid_body_data
+from ._spatial._body_data_file import BodyDataFileError as BodyDataFileError, read_body_data as read_body_data, write_body_data as write_body_data
+from ._spatial._body_from_matrices import body_data_from_matrices as body_data_from_matrices
 from ._spatial._point_on_line import SpatialPointOnLine as SpatialPointOnLine
 from ._spatial._point_on_plane import SpatialPointOnPlane as SpatialPointOnPlane
 from ._spatial._revolute import SpatialRevolute as SpatialRevolute
