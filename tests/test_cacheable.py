@@ -89,6 +89,16 @@ def test_a_function_counts_by_its_code_and_a_closure_is_never_keyed():
     assert _program_key((factory(1.0),), treedef, leaves, {}) is None
 
 
+def test_a_program_is_keyed_by_the_platform_it_runs_on(monkeypatch):
+    # Found on an H100 (RESULTS "GPU"): a program exported by a GPU process was loaded by a CPU process
+    # sharing the cache folder, and JAX refused it ("exported for platforms ('cuda',) but it is used on
+    # ('cpu',)"). The key must differ between platforms.
+    leaves, treedef = jax.tree_util.tree_flatten(jnp.zeros(3))
+    here = _program_key((_named,), treedef, leaves, {})
+    monkeypatch.setattr(jax, "default_backend", lambda: "cuda" if jax.devices()[0].platform == "cpu" else "cpu")
+    assert _program_key((_named,), treedef, leaves, {}) != here
+
+
 # --- from Python: a second process loads the compiled gradient (issue 28) -------------------------
 PROGRAM = """
 import json, logging, sys, time

@@ -161,6 +161,9 @@ def _program_key(static, treedef, leaves, options) -> str | None:
     if " at 0x" in text:
         return None
     h = hashlib.sha256(_source_digest().encode())
+    # The platform the program is lowered for: an exported program runs only there (one exported on a GPU
+    # is refused on the CPU: "exported for platforms ('cuda',) but it is used on ('cpu',)").
+    h.update(jax.default_backend().encode())
     h.update(text.encode())
     h.update(repr([(leaf.shape, str(leaf.dtype)) for leaf in leaves]).encode())
     return h.hexdigest()[:32]
