@@ -99,11 +99,9 @@ class RitzBeam:
         self.moment = phi @ (w * rho_a * x)
         self.load = phi @ (w * rho_a)
 
-    def tip_deflections(self, ts, *, omega_s, t_s, stiffening, gravity=0.0, rtol=1e-11, atol=1e-13):
-        """Chordwise `v(L, t)` and flapwise `w(L, t)` at the times `ts` (the beam starts undeformed and at rest).
-
-        **Returns:** `(v, w)`, each `(len(ts),)`.
-        """
+    def coordinates(self, ts, *, omega_s, t_s, stiffening, gravity=0.0, rtol=1e-11, atol=1e-13):
+        """The Ritz coordinates `a(t)` (chordwise) and `b(t)` (flapwise) at the times `ts` (the beam starts undeformed
+        and at rest). **Returns:** `(a, b)`, each `(len(ts), n)`."""
         n = self.mass.shape[0]
         s = 1.0 if stiffening else 0.0
         m_inv = np.linalg.inv(self.mass)
@@ -117,12 +115,23 @@ class RitzBeam:
 
         ts = np.asarray(ts, dtype=float)
         # The law's third derivative jumps at t_s: integrate the two pieces separately (dense output, 7th order).
+        ends = (min(t_s, ts.max()),) + ((ts.max(),) if ts.max() > t_s else ())
         pieces, y, t0 = [], np.zeros(4 * n), 0.0
-        for t_end in (min(t_s, ts.max()), ts.max()):
+        for t_end in ends:
             sol = solve_ivp(rhs, (t0, t_end), y, method="DOP853", dense_output=True, rtol=rtol, atol=atol)
             if not sol.success:
                 raise RuntimeError(sol.message)
             pieces.append(sol.sol)
             y, t0 = sol.y[:, -1], t_end
-        out = np.where((ts <= t_s)[:, None], pieces[0](np.minimum(ts, t_s)).T, pieces[1](np.maximum(ts, t0 if ts.max() <= t_s else t_s)).T)
-        return out[:, :n] @ self.tip, out[:, n:2 * n] @ self.tip
+        out = pieces[0](np.minimum(ts, t_s)).T
+        if len(pieces) == 2:
+            out = np.where((ts <= t_s)[:, None], out, pieces[1](np.maximum(ts, t_s)).T)
+        return out[:, :n], out[:, n:2 * n]
+
+    def tip_deflections(self, ts, **motion):
+        """Chordwise `v(L, t)` and flapwise `w(L, t)` at the times `ts`; keywords as [`coordinates`][].
+
+        **Returns:** `(v, w)`, each `(len(ts),)`.
+        """
+        a, b = self.coordinates(ts, **motion)
+        return a @ self.tip, b @ self.tip
