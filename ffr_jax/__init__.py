@@ -26,6 +26,8 @@ from ._design import (
 from ._design import (H8 as H8, H11 as H11, Tet10 as Tet10, SolidMesh as SolidMesh, SolidFEModel as SolidFEModel, box_grid as box_grid,
                       hex_to_tet10 as hex_to_tet10, read_solid_mesh as read_solid_mesh, free_modes_dense as free_modes_dense,
                       free_modes_sparse as free_modes_sparse)
+from ._design.solid_groups import (PhysicalGroups as PhysicalGroups, read_solid_groups as read_solid_groups,
+                                   solid_groups_from_meshio as solid_groups_from_meshio)
 from ._api import check_gradient as check_gradient
 from ._app._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient
 from ._app._animation import animate as animate

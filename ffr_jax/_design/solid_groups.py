@@ -1,0 +1,164 @@
+"""Named regions of a solid mesh: the physical groups of a gmsh mesh (through `meshio`).
+
+A designer names the bores, bolt faces and passive volumes of a part in gmsh (`Physical Surface("bore") = {...}`,
+`Physical Volume("hub") = {...}`); the written mesh holds each group's cells tagged (`gmsh:physical` cell data) and
+the names in its `field_data` (`{name: [tag, dimension]}`). [`PhysicalGroups`][] resolves a name to the elements of
+a volume group, the faces of a surface group (checked to lie on the mesh's surface: an interface is where the part
+meets a joint) or the nodes of either, in the numbering of the [`SolidMesh`][] that `solid_from_meshio` builds —
+no searching of nodes by distance. Unknown names, a group of the wrong dimension and faces inside the part are
+`ValueError`s naming the group and the fix.
+"""
+
+import pathlib
+
+import numpy as np
+
+from .element.solid_base import _format_ids
+from .solid_mesh import SolidMesh, _SOLID_CELLS, solid_from_meshio
+
+# Corner-node faces of each solid cell (VTK/meshio node order): a face is the sorted tuple of its corners.
+_CELL_FACES = {
+    "hexahedron": ((0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)),
+    "tetra10": ((0, 1, 2), (0, 1, 3), (1, 2, 3), (0, 2, 3)),
+}
+# Corners of the surface cells gmsh writes for a physical surface.
+_FACE_CORNERS = {"triangle": 3, "triangle6": 3, "quad": 4, "quad8": 4, "quad9": 4}
+_TAG = "gmsh:physical"
+
+
+def _face_keys(faces: np.ndarray) -> np.ndarray:
+    return np.sort(faces, axis=1)
+
+
+def boundary_faces(mesh: SolidMesh) -> np.ndarray:
+    """The faces of `mesh` that belong to one element only (its surface), `(n_faces, corners)` sorted corner
+    nodes."""
+    faces = np.concatenate([mesh.elements[:, list(f)] for f in _CELL_FACES[mesh.cell_type]], axis=0)
+    keys, counts = np.unique(_face_keys(faces), axis=0, return_counts=True)
+    return keys[counts == 1]
+
+
+class PhysicalGroups:
+    """The physical groups of a solid mesh, by name (see the module docstring). Build it with
+    [`read_solid_groups`][] or `solid_groups_from_meshio`.
+
+    **Attributes:** `mesh`, the [`SolidMesh`][]; `dimensions`, `{name: 2 (surface) or 3 (volume)}`.
+    """
+
+    __slots__ = ("mesh", "dimensions", "_elements", "_faces", "_face_nodes")
+
+    def __init__(self, mesh: SolidMesh, dimensions: dict, elements: dict, faces: dict, face_nodes: dict):
+        self.mesh, self.dimensions = mesh, dict(dimensions)
+        self._elements, self._faces, self._face_nodes = elements, faces, face_nodes
+
+    def __repr__(self) -> str:
+        return f"PhysicalGroups({self._listing()}, mesh={self.mesh!r})"
+
+    def _listing(self) -> str:
+        kinds = {2: "surface", 3: "volume"}
+        return ", ".join(f"{n!r} ({kinds.get(d, f'dimension {d}')})" for n, d in sorted(self.dimensions.items()))
+
+    def _check(self, name, dimension: int | None = None) -> None:
+        if not isinstance(name, str):
+            raise TypeError(f"A physical group is named by a str, got {name!r}.")
+        if name not in self.dimensions:
+            raise ValueError(f"This mesh has no physical group named {name!r}; its groups are: "
+                             f"{self._listing() or 'none'}. Check the spelling, or name the group in gmsh "
+                             f"(Physical Surface(\"{name}\") = {{...}}; or Physical Volume) before meshing.")
+        if dimension is not None and self.dimensions[name] != dimension:
+            want = {2: "a physical surface (faces)", 3: "a physical volume (elements)"}[dimension]
+            raise ValueError(f"The physical group {name!r} has dimension {self.dimensions[name]}, but this needs "
+                             f"{want}; its groups are: {self._listing()}.")
+
+    def elements(self, name: str) -> np.ndarray:
+        """The element indices of the physical volume `name` (e.g. a passive region), sorted."""
+        self._check(name, 3)
+        return self._elements[name]
+
+    def faces(self, name: str) -> np.ndarray:
+        """The faces of the physical surface `name` as corner-node tuples `(n_faces, 3 or 4)`, each checked to be a
+        face on the surface of the mesh (an interface, a clamped face, a loaded face)."""
+        self._check(name, 2)
+        faces = self._faces[name]
+        boundary = {tuple(k) for k in boundary_faces(self.mesh)}
+        off = np.flatnonzero([tuple(k) not in boundary for k in _face_keys(faces)])
+        if off.size:
+            raise ValueError(
+                f"{off.size} of the {len(faces)} faces of the physical surface {name!r} are not on the surface of the "
+                f"mesh (faces {_format_ids(off)}: inside the part, between two elements, or not a face of any "
+                "element). An interface, clamped or loaded face must be part of the solid's boundary: in gmsh, put "
+                "the bore's or face's boundary surfaces in the group, not an inner (embedded) surface, and mesh the "
+                "volume and the group together.")
+        return faces
+
+    def nodes(self, name: str) -> tuple[int, ...]:
+        """The nodes of the physical group `name` (a surface's faces are checked as in `faces`), sorted: e.g. the
+        node set of a bore as a marker, or the nodes to hold."""
+        self._check(name)
+        if self.dimensions[name] == 2:
+            self.faces(name)
+            return tuple(int(n) for n in np.unique(self._face_nodes[name]))
+        return tuple(int(n) for n in np.unique(self.mesh.elements[self._elements[name]]))
+
+
+def solid_groups_from_meshio(mesh, orientation: str = "refuse") -> PhysicalGroups:
+    """The [`PhysicalGroups`][] of a `meshio.Mesh` with gmsh physical groups (`field_data` names and
+    `gmsh:physical` cell tags), on its solid mesh (`solid_from_meshio`)."""
+    solid = solid_from_meshio(mesh, orientation)
+    field = getattr(mesh, "field_data", None) or {}
+    if not field or _TAG not in mesh.cell_data:
+        raise ValueError("This mesh holds no named physical groups (no field_data names or no 'gmsh:physical' cell "
+                         "tags): define them in gmsh (Physical Surface/Volume with a name) and write the mesh as a "
+                         ".msh file that keeps them (gmsh itself, or meshio with file_format='gmsh22').")
+    points = np.asarray(mesh.points, dtype=np.float64)
+    solid_type = next(b.type for b in mesh.cells if b.type in _SOLID_CELLS)
+    # The solid mesh keeps the points some solid cell uses, in their order: map point index -> node index.
+    used = np.unique(np.concatenate([b.data.ravel() for b in mesh.cells if b.type == solid_type]))
+    renumber = np.full(points.shape[0], -1, dtype=np.int64)
+    renumber[used] = np.arange(used.size)
+    dimensions, elements, faces, face_nodes = {}, {}, {}, {}
+    offset = 0
+    for block, tags in zip(mesh.cells, mesh.cell_data[_TAG]):
+        tags = np.asarray(tags).ravel()
+        for name, (tag, dim) in ((n, np.asarray(v).ravel()[:2]) for n, v in field.items()):
+            rows = np.flatnonzero(tags == tag)
+            if block.type == solid_type and dim == 3:
+                elements.setdefault(name, []).append(offset + rows)
+            elif block.type in _FACE_CORNERS and dim == 2:
+                corners = renumber[np.asarray(block.data)[rows][:, :_FACE_CORNERS[block.type]]]
+                faces.setdefault(name, []).append(corners)
+                face_nodes.setdefault(name, []).append(renumber[np.asarray(block.data)[rows]].ravel())
+            else:
+                continue
+            dimensions[name] = int(dim)
+        if block.type == solid_type:
+            offset += len(block.data)
+    for name, (tag, dim) in ((n, np.asarray(v).ravel()[:2]) for n, v in field.items()):
+        dimensions.setdefault(name, int(dim))  # a named group without cells of this mesh: empty
+    elements = {n: np.sort(np.concatenate(v)) for n, v in elements.items()}
+    faces = {n: np.concatenate(v, axis=0) for n, v in faces.items()}
+    face_nodes = {n: np.concatenate(v) for n, v in face_nodes.items()}
+    for name, dim in dimensions.items():
+        if dim == 3:
+            elements.setdefault(name, np.zeros(0, dtype=np.int64))
+        elif dim == 2:
+            faces.setdefault(name, np.zeros((0, 3), dtype=np.int64))
+            face_nodes.setdefault(name, np.zeros(0, dtype=np.int64))
+    return PhysicalGroups(solid, dimensions, elements, faces, face_nodes)
+
+
+def read_solid_groups(path, orientation: str = "refuse") -> PhysicalGroups:
+    """Read a gmsh mesh file with named physical groups: its solid mesh and its [`PhysicalGroups`][].
+
+    **Returns:** a [`PhysicalGroups`][] (`.mesh` the [`SolidMesh`][], as [`read_solid_mesh`][] reads it).
+    """
+    import meshio
+
+    if not pathlib.Path(path).is_file():
+        raise FileNotFoundError(f"read_solid_groups: no mesh file at {str(path)!r}.")
+    try:
+        mesh = meshio.read(path)
+    except (Exception, SystemExit) as err:  # meshio exits (SystemExit) on some unreadable files
+        raise ValueError(f"read_solid_groups: meshio could not read {str(path)!r} ({type(err).__name__}: {err}); "
+                         "give a gmsh .msh file with named physical groups.") from None
+    return solid_groups_from_meshio(mesh, orientation)
