@@ -16,6 +16,7 @@ import io
 import json
 import zipfile
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -365,3 +366,37 @@ def test_body_from_matrices_bad_input(box, tmp_path):
     bad.write_text("not a matrix\n")
     with pytest.raises(ValueError, match="cannot read"):
         fj.body_data_from_matrices(c, bad, m, mk, n_modes=2)
+
+
+def test_design_derivatives_round_trip(tmp_path):
+    """The augmented data (Held 2021): `d p / d x` from `jax.jacfwd` written with the data and read back bit for bit
+    as a pytree of the data's type; a file without them, or derivatives of the wrong shape, are refused."""
+    rng = np.random.default_rng(3)
+    masses, positions = rng.uniform(0.5, 1.5, 6), rng.normal(size=(6, 3))
+    modes = rng.normal(size=(6, 3, 2))
+
+    def body(x):  # node masses and modal stiffness scaled by a 3-entry design
+        return fj.spatial_flexible_body_data(masses * (1.0 + x[0] * np.arange(6.0) + x[1]), positions, modes,
+                                             jnp.diag(jnp.array([3.0, 5.0]) * (1.0 + x[2])), (0, 4))
+
+    x = jnp.array([0.1, 0.2, 0.3])
+    data, d_data = body(x), jax.jacfwd(body)(x)
+    path = tmp_path / "augmented.npz"
+    fj.write_body_data(path, data, jacobian=d_data)
+    got, d_got = fj.read_body_data(path, jacobian=True)
+    _assert_bit_for_bit(got, data)
+    for name in _fields(data):
+        a, b = np.asarray(getattr(d_got, name)), np.asarray(getattr(d_data, name))
+        assert a.shape == np.shape(getattr(data, name)) + (3,) and a.tobytes() == b.tobytes(), name
+    _assert_bit_for_bit(fj.read_body_data(path), data)  # a reader that wants only the data
+
+    plain = tmp_path / "plain.npz"
+    fj.write_body_data(plain, data)
+    _expect_jacobian = pytest.raises(fj.BodyDataFileError, match="no design derivatives")
+    with _expect_jacobian:
+        fj.read_body_data(plain, jacobian=True)
+    arrays = {**_arrays(data), **{"d_" + k: v for k, v in _arrays(d_data).items()}}
+    arrays["d_modal_mass"] = arrays["d_modal_mass"][..., :2]
+    bad = tmp_path / "bad.npz"
+    files.write_arrays(bad, "SpatialFlexibleBodyData", arrays)
+    _expect(bad, "design derivative of 'modal_mass'", "(2, 2, 3)")

@@ -12,7 +12,9 @@ reused in other mechanisms without its FE model: [`write_body_data`][] stores a 
   `{"name", "shape", "dtype"}` in the class's field order), `sha256` (the hex SHA-256 of the concatenated
   bytes of the array entries, in that order), `units`, `description` and `writer`;
 - one `<field>.npy` entry per field (NumPy's documented `.npy` format, little-endian float64 `<f8`), the
-  field's meaning and shape given by the class's docstring (e.g. `second_moment_qq` `(n_q, n_q, 3, 3)`).
+  field's meaning and shape given by the class's docstring (e.g. `second_moment_qq` `(n_q, n_q, 3, 3)`);
+- optionally the design derivatives at the design the data were computed for (the "augmented standard input
+  data" of Held 2021): one `d_<field>.npy` entry per field, `d field / d x` `(field shape..., n_design)`.
 
 Why this container: `.npy`/`.npz` is NumPy's own maintained, documented format, readable without this
 package (NumPy in Python, `cnpy` in C++, `NPZ.jl` in Julia) and exact for float64 (the bytes are stored as
@@ -26,9 +28,15 @@ Units: the package converts nothing; the data are in the consistent units of the
 Reading validates, each failure a [`BodyDataFileError`][] (a `ValueError`) naming the file, the entry and
 what to do: not a body-data file; truncated (the ZIP directory at its end missing); corrupt (a CRC-32 or
 SHA-256 mismatch, an unreadable entry or header); written by a newer format version than this package reads;
-a missing, extra, non-float64 or wrongly shaped field; physically impossible data (NaN or inf, mass `<= 0`,
+a missing, extra, non-float64 or wrongly shaped field or design derivative; physically impossible data (NaN or inf, mass `<= 0`,
 a second moment, modal mass or modal stiffness that is not symmetric, a modal stiffness that is not
-positive semi-definite, and a mass matrix of the body at rest that is not positive definite).
+positive semi-definite, a mass matrix of the body at rest that is indefinite, or singular in the modal coordinates:
+a mode that is a rigid-body motion).
+
+References:
+- A. Held, *On design sensitivities in the structural analysis and optimization of flexible multibody systems*,
+  Multibody System Dynamics (2021), doi:10.1007/s11044-021-09800-1 (body input data files augmented by their
+  design derivatives).
 """
 
 import dataclasses
@@ -52,6 +60,7 @@ from ._flexible_body_data import SpatialFlexibleBodyData
 FORMAT = "ffr_jax.body_data"
 FORMAT_VERSION = 1
 HEADER = "header.json"
+JACOBIAN_PREFIX = "d_"
 _KINDS = {"SpatialFlexibleBodyData": SpatialFlexibleBodyData, "SpatialBodyData": SpatialBodyData,
           "BodyData": BodyData}
 # Each field's shape in the symbols `q` (modes, from modal_mass) and `m` (markers, from marker_positions).
@@ -247,6 +256,40 @@ def check_body_data_arrays(kind: str, arrays: dict[str, np.ndarray], where: str)
                 "motions from the modes (free-free modes, or modes of the supported body).")
 
 
+def check_jacobian_arrays(kind: str, arrays: dict[str, np.ndarray], jacobian: dict[str, np.ndarray],
+                          where: str) -> None:
+    """The design derivatives `d field / d x` of checked body-data arrays: every field, shape `field + (n_design,)`,
+    float64, finite, and symmetric where the field is (the derivative of a symmetric matrix is symmetric)."""
+    if not jacobian:
+        return
+    names = _field_names(kind)
+    missing = [n for n in names if n not in jacobian]
+    extra = [n for n in jacobian if n not in names]
+    if missing or extra:
+        raise BodyDataFileError(f"{where}: the design derivatives of the fields {missing} are missing and those of "
+                                f"{extra} are unknown; give d field / d x for every field of {kind} or for none.")
+    n_design = jacobian["mass"].shape[0] if jacobian["mass"].ndim == 1 else None
+    for name in names:
+        d = jacobian[name]
+        want = arrays[name].shape + (n_design,)
+        if d.dtype != np.float64 or d.shape != want or not n_design:
+            raise BodyDataFileError(
+                f"{where}: the design derivative of {name!r} is {d.dtype} {d.shape}, expected float64 {want} (the "
+                f"field's shape and one design axis of n_design = {n_design} from that of 'mass'). Flatten a "
+                "multi-dimensional design to one axis.")
+        if not np.all(np.isfinite(d)):
+            raise BodyDataFileError(f"{where}: the design derivative of {name!r} contains NaN or inf.")
+    pairs = {"inertia": (1, 0, 2), "second_moment": (1, 0, 2), "modal_mass": (1, 0, 2), "modal_stiffness": (1, 0, 2),
+             "second_moment_qq": (1, 0, 3, 2, 4)}
+    for name, axes in pairs.items():
+        if name in jacobian and jacobian[name].ndim == len(axes):
+            asym = _asymmetry(jacobian[name], np.transpose(jacobian[name], axes))
+            if asym > SYMMETRY_TOL:
+                raise BodyDataFileError(
+                    f"{where}: the design derivative of {name!r} differs from its transpose by {asym:.3g} of its "
+                    f"largest entry (allowed {SYMMETRY_TOL:g}): the derivative of a symmetric field is symmetric.")
+
+
 def _arrays_of(data, kind: str) -> dict[str, np.ndarray]:
     arrays = {}
     for name in _field_names(kind):
@@ -269,6 +312,7 @@ def write_arrays(path, kind: str, arrays: dict[str, np.ndarray], units: str = _U
     Atomic: a temporary file in the target's directory, renamed over the target when complete."""
     path = Path(path)
     names = [n for n in _field_names(kind) if n in arrays] + [n for n in arrays if n not in _field_names(kind)]
+    # (d_<field> entries, the design derivatives, follow the fields)
     members = {n: _npy_bytes(arrays[n]) for n in names}
     header = {"format": FORMAT, "format_version": version, "kind": kind,
               "fields": [{"name": n, "shape": list(arrays[n].shape), "dtype": arrays[n].dtype.str} for n in names],
@@ -290,8 +334,9 @@ def write_arrays(path, kind: str, arrays: dict[str, np.ndarray], units: str = _U
         raise
 
 
-def write_body_data(path, data, *, units: str = _UNITS, description: str = "") -> None:
-    """Write the body data of one body to a body-data file (format version 1; see the module docs).
+def write_body_data(path, data, *, jacobian=None, units: str = _UNITS, description: str = "") -> None:
+    """Write the body data of one body, and optionally their design derivatives, to a body-data file (format
+    version 1; see the module docs).
 
     The data are checked first as [`read_body_data`][] checks them, so a file that this function writes is
     always readable. The file is written atomically (a temporary file renamed over `path`), so a reader never
@@ -301,6 +346,10 @@ def write_body_data(path, data, *, units: str = _UNITS, description: str = "") -
     - `path`: the file to write (`.npz` recommended; overwritten if it exists).
     - `data`: a [`SpatialFlexibleBodyData`][], [`SpatialBodyData`][] or planar [`BodyData`][] with concrete
       float64 arrays (not inside `jax.jit`; one body, not a batch).
+    - `jacobian`: optional design derivatives `d p / d x` of the body data at the design `x` they were computed
+      for (the "augmented standard input data"): the same type as `data`, each field with one more, last axis
+      of length `n_design`, as `jax.jacfwd(p)(x)` gives for a function `p` from a design vector `x` `(n_design,)`
+      to body data. Stored as entries `d_<field>.npy`.
     - `units`: a note of the units the data are in (stored, never used).
     - `description`: free text stored in the header (e.g. the part's name and how it was modelled).
 
@@ -314,7 +363,15 @@ def write_body_data(path, data, *, units: str = _UNITS, description: str = "") -
     """
     kind = _kind_of(data)
     arrays = _arrays_of(data, kind)
-    check_body_data_arrays(kind, arrays, f"body data to write to {os.fspath(path)}")
+    where = f"body data to write to {os.fspath(path)}"
+    check_body_data_arrays(kind, arrays, where)
+    if jacobian is not None:
+        if type(jacobian) is not type(data):
+            raise TypeError(f"jacobian must be a {kind} of design derivatives (e.g. jax.jacfwd of the function that "
+                            f"gives the body data), got {type(jacobian).__name__}.")
+        jac = _arrays_of(jacobian, kind)
+        check_jacobian_arrays(kind, arrays, jac, where)
+        arrays.update({JACOBIAN_PREFIX + name: value for name, value in jac.items()})
     write_arrays(path, kind, arrays, units=units, description=str(description))
 
 
@@ -376,7 +433,7 @@ def _header(path, archive: zipfile.ZipFile) -> dict:
     return header
 
 
-def read_body_data(path):
+def read_body_data(path, *, jacobian: bool = False):
     """Read the body data of one body from a body-data file written by [`write_body_data`][].
 
     Every check of the module docs is made before anything is built, and each failure names the file, the
@@ -384,13 +441,22 @@ def read_body_data(path):
 
     **Arguments:**
     - `path`: the file.
+    - `jacobian`: also return the design derivatives stored with the data (an error if the file has none).
 
     **Returns:** the [`SpatialFlexibleBodyData`][], [`SpatialBodyData`][] or [`BodyData`][] that was written,
-    every array bit for bit (float64 JAX arrays).
+    every array bit for bit (float64 JAX arrays); with `jacobian=True` the pair `(data, d_data)`, `d_data` of
+    the same type with each field's derivative `(field shape..., n_design)` (a pytree: the design gradient of an
+    objective `psi(p)` is `sum` over the fields of `tensordot(dpsi_dp.field, d_data.field, field.ndim)`).
 
     **Raises:** [`BodyDataFileError`][] (a `ValueError`) for a file that is not a body-data file, truncated,
     corrupt, of a newer format version, with missing or wrongly shaped fields, or physically impossible;
     `FileNotFoundError` where there is no file.
+
+    **Example:**
+    ```python
+    data, d_data = fj.read_body_data("rod.npz", jacobian=True)
+    grad_x = sum(jnp.tensordot(g, d, g.ndim) for g, d in zip(jax.tree.leaves(grad_p), jax.tree.leaves(d_data)))
+    ```
     """
     with open(path, "rb") as f:
         raw = f.read()
@@ -412,8 +478,20 @@ def read_body_data(path):
             raise _fail(path, f"corrupt: entry '{name}.npy' holds {arrays[name].dtype.str} {arrays[name].shape}, "
                               f"the header says {spec.get('dtype')} {spec.get('shape')}.")
     kind = header["kind"]
+    jac = {n[len(JACOBIAN_PREFIX):]: a for n, a in arrays.items() if n.startswith(JACOBIAN_PREFIX)}
+    arrays = {n: a for n, a in arrays.items() if not n.startswith(JACOBIAN_PREFIX)}
     check_body_data_arrays(kind, arrays, os.fspath(path))
+    check_jacobian_arrays(kind, arrays, jac, os.fspath(path))
     try:
-        return _KINDS[kind](**{n: jnp.asarray(arrays[n]) for n in _field_names(kind)})
+        data = _KINDS[kind](**{n: jnp.asarray(arrays[n]) for n in _field_names(kind)})
     except ValueError as err:
         raise _fail(path, str(err)) from None
+    if not jacobian:
+        return data
+    if not jac:
+        raise _fail(path, "the file holds no design derivatives (write them with write_body_data(..., jacobian=...)); "
+                          "read it with jacobian=False.")
+    # The derivatives have the data's type but not its field shapes: built as a pytree, without the class's checks.
+    d_data = jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(data),
+                                          [jnp.asarray(jac[n]) for n in _field_names(kind)])
+    return data, d_data
