@@ -65,6 +65,13 @@ def _point_mass_bodies():
 BODIES = _point_mass_bodies()
 
 
+def test_the_format_names_every_field_of_the_classes():
+    for kind, cls in files._KINDS.items():
+        assert tuple(cls.__dataclass_fields__) == files._field_names(kind), (
+            f"{kind} changed its fields: give the new ones a shape in _body_data_file._SHAPES, raise FORMAT_VERSION, "
+            "and read the older version's files too.")
+
+
 def _fields(data):
     return tuple(data.__dataclass_fields__)
 
