@@ -97,7 +97,7 @@ def _blocked_to_interleaved(x, n_nodes: int):
     return x[perm][:, perm]
 
 
-def _check_mass_structure(m, n_nodes: int) -> None:
+def _check_mass_structure(m) -> None:
     """`M = m_s ⊗ I_3` (interleaved): equal scalar blocks for x, y and z, no coupling between directions."""
     part = lambda a, b: m[a::3][:, b::3]
     amax = lambda x: float(abs(x).max()) if sp.issparse(x) else float(np.max(np.abs(x)))
@@ -265,10 +265,13 @@ def body_data_from_matrices(coordinates, stiffness, mass, markers: tuple, n_mode
     m = _as_matrix(mass, 3 * n_nodes, "mass")
     if dof_order == "blocked":
         k, m = _blocked_to_interleaved(k, n_nodes), _blocked_to_interleaved(m, n_nodes)
-    _check_mass_structure(m, n_nodes)
+    _check_mass_structure(m)
     if (modes is None) == (n_modes is None):
         raise ValueError("give either n_modes (the modes are computed) or modes (used as given), not both or "
                          "neither.")
+    if modes is not None and fixed_dofs is not None:
+        raise ValueError("fixed_dofs choose the supports of computed modes; with modes given they would be ignored: "
+                         "give one of them.")
     if modes is None:
         if not isinstance(n_modes, (int, np.integer)) or isinstance(n_modes, bool) or n_modes < 1:
             raise ValueError(f"n_modes must be a positive int, got {n_modes!r}.")
