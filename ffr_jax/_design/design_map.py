@@ -18,7 +18,8 @@ from .._scene._scene import Scene
 from .._scene._stiffening import GeometricStiffening
 from .designed_body import DesignedBody
 from .._spatial._flexible_body_data import SpatialFlexibleBodyData
-from .._spatial._lift import designed_body_data as lifted_body_data
+from .._spatial._lifted_stiffening import lifted_body_data_and_geometric_stiffness
+from .._spatial._stiffening import SpatialGeometricStiffening
 from .modal.basis import ModalBasis
 
 
@@ -65,8 +66,8 @@ class DesignMap(AbstractDesignMap):
     (`ffr_jax._spatial._lift`: nodes at `z = 0`, in-plane modes).
 
     The map recomputes, besides the body data, the design-dependent data of each designed body's
-    [`GeometricStiffening`][] in the scene (`K_geo(x_b)`); a scene without such an effect
-    computes nothing more.
+    [`GeometricStiffening`][] in the scene (`K_geo(x_b)`), or for a lifted body the six matrices of its
+    [`SpatialGeometricStiffening`][]; a scene without such an effect computes nothing more.
 
     **Arguments:**
     - `bodies`: `{scene body name: DesignedBody}` (at least one).
@@ -183,9 +184,15 @@ class DesignMap(AbstractDesignMap):
                           if isinstance(force, GeometricStiffening) and force.body == index]
             if isinstance(scene.bodies[index].data, SpatialFlexibleBodyData):  # a planar design lifted into space
                 if stiffening:
-                    raise ValueError(f"Geometric stiffening of the spatial body {name!r} is not available yet; remove "
-                                     "the GeometricStiffening of that body.")
-                scene = eqx.tree_at(lambda s: s.bodies[index].data, scene, lifted_body_data(body, by_body[name]))
+                    raise ValueError(f"The spatial body {name!r} has a (planar) GeometricStiffening; a spatial body "
+                                     f"takes SpatialGeometricStiffening(body={index}, modal_geometric_stiffness="
+                                     "jnp.zeros((6, n_q, n_q))), whose six matrices the design map computes.")
+                spatial = [k for k, force in enumerate(scene.forces)
+                           if isinstance(force, SpatialGeometricStiffening) and force.body == index]
+                data, k_six = lifted_body_data_and_geometric_stiffness(body, by_body[name], stiffening=bool(spatial))
+                scene = eqx.tree_at(lambda s: s.bodies[index].data, scene, data)
+                for k in spatial:
+                    scene = eqx.tree_at(lambda s: s.forces[k].modal_geometric_stiffness, scene, k_six)
                 continue
             data, k_geo = body.body_data_and_geometric_stiffness(by_body[name], stiffening=bool(stiffening))
             scene = eqx.tree_at(lambda s: s.bodies[index].data, scene, data)

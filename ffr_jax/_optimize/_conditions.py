@@ -13,6 +13,7 @@ from .._dynamics._case import Case
 from .._design.design_map import DesignMap
 from .._dynamics._problem import Problem
 from .._scene._stiffening import GeometricStiffening
+from .._spatial._stiffening import SpatialGeometricStiffening
 from .._sensitivity._base import AbstractSensitivity
 from .._typing import Designs
 
@@ -110,8 +111,8 @@ def _designed_nodes(case: Case):
     geometric stiffness), in a fixed order."""
     scene = case.problem.scene
     bodies = [scene.body_index(name) for name in case.design_map.names]
-    forces = [k for k, force in enumerate(scene.forces) if isinstance(force, GeometricStiffening)
-              and force.body in bodies]
+    forces = [k for k, force in enumerate(scene.forces)
+              if isinstance(force, (GeometricStiffening, SpatialGeometricStiffening)) and force.body in bodies]
     return lambda s: tuple(s.bodies[i].data for i in bodies) + tuple(s.forces[k].modal_geometric_stiffness
                                                                      for k in forces)
 

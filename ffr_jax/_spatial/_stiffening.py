@@ -22,8 +22,10 @@ class SpatialGeometricStiffening(AbstractForce):
 
     `Q_q = -K_geo(omega) q`,   `omega = 2 H(p) p'` (body frame).
 
-    `modal_geometric_stiffness` `(6, n_q, n_q)` is an array leaf: computed from the design
-    ([`solid_centrifugal_geometric_stiffness`][]), it carries design gradients.
+    `modal_geometric_stiffness` `(6, n_q, n_q)` is an array leaf computed from the design, so it carries design
+    gradients: [`solid_centrifugal_geometric_stiffness`][] for a hexahedral solid body; for a planar design lifted
+    into space the [`DesignMap`][] computes it (`ffr_jax._spatial._lifted_stiffening`: the in-plane cases; the two
+    out-of-plane ones vanish), so a scene template may hold zeros.
 
     **Limits** (first order in the pre-stress, as the planar effect):
     - Only the centrifugal load of the frame's own angular velocity about the frame origin is included; the
