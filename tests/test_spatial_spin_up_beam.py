@@ -7,7 +7,7 @@ unit load cases of `solid_centrifugal_geometric_stiffness` against a direct solv
 their exact scaling in the design (the JVP of `K_k` along the density is `K_k`, along a uniform Young's modulus 0).
 benchmarks/RESULTS.md ("Spin-up beam") has the full-size comparison and its mesh convergence.
 
-Marked slow: the simulation compiles once (~15-20 s; the run without stiffening is the same program with the
+The refusals of bad input run in the default suite (0.3 s). Marked slow: the simulation compiles once (~15-20 s; the run without stiffening is the same program with the
 stiffening matrices set to zero, which is the same equations as leaving the force out).
 """
 
@@ -169,3 +169,19 @@ def test_unit_cases_carry_exact_design_derivatives(small_beam):
     # d K / d c at c = 1 is K along rho -> c rho and 0 along E -> c E, exactly; round-off ~1e-12 of K.
     assert np.max(np.abs(np.asarray(along_density - value))) <= 1e-10 * scale
     assert np.max(np.abs(np.asarray(along_youngs))) <= 1e-10 * scale
+
+
+def test_unit_cases_refuse_bad_input():
+    # Cheap (no compile): the refusals come before anything is traced.
+    hexes = fj.box_grid(2, 1, 1, 1.0, 0.1, 0.1)
+    model = fj.SolidFEModel(hexes, fj.H8())
+    values, modes = jnp.ones(model.n_elements), jnp.zeros((model.n_dof, 1))
+    node = int(np.flatnonzero(np.isclose(hexes.nodes[:, 0], 0.0))[0])
+    with pytest.raises(ValueError, match="fixed_dofs must name supports"):
+        fj.solid_centrifugal_geometric_stiffness(model, values, values, modes, ())
+    with pytest.raises(ValueError, match="do not hold the body"):  # one node held: the body can turn about it
+        fj.solid_centrifugal_geometric_stiffness(model, values, values, modes, (3 * node, 3 * node + 1, 3 * node + 2))
+    tets = fj.SolidFEModel(fj.hex_to_tet10(hexes), fj.Tet10())
+    with pytest.raises(ValueError, match="hexahedral mesh"):
+        fj.solid_centrifugal_geometric_stiffness(tets, jnp.ones(tets.n_elements), jnp.ones(tets.n_elements),
+                                                 jnp.zeros((tets.n_dof, 1)), (0, 1, 2))

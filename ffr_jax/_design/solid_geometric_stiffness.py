@@ -41,6 +41,7 @@ from .element.h8 import gauss_points_2x2x2, trilinear
 from .element.solid_base import isotropic
 from .geometric_stiffness import MAX_DENSE_SOLVE_DOF
 from .solid_assembly import SolidFEModel, solid_dense_matrix
+from .solid_modes import rigid_motions
 
 # The six products of the angular velocity's body components, in the order of the load cases.
 PRODUCTS = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
@@ -125,6 +126,11 @@ def solid_centrifugal_geometric_stiffness(model: SolidFEModel, youngs, densities
     if fixed.size == 0 or fixed.min() < 0 or fixed.max() >= model.n_dof:
         raise ValueError(f"fixed_dofs must name supports among the {model.n_dof} degrees of freedom (a body turning "
                          f"about its frame origin is held there, e.g. a clamped root); got {fixed_dofs!r}.")
+    held = rigid_motions(model.mesh.nodes)[fixed]
+    if np.linalg.matrix_rank(held, tol=1e-10 * np.max(np.abs(held))) < 6:
+        raise ValueError("fixed_dofs do not hold the body: some rigid motion leaves every fixed degree of freedom at "
+                         "rest, so the static pre-stress solve is singular. Hold at least three non-collinear nodes "
+                         "(e.g. a clamped face) or the reference conditions of the body's modes.")
     free = np.setdiff1d(np.arange(model.n_dof), fixed)
     k = solid_dense_matrix(model, youngs, "stiffness")
     m = solid_dense_matrix(model, densities, "mass")
