@@ -127,5 +127,8 @@ def test_fine_mesh():
 
 @pytest.mark.slow
 def test_long_horizon():
+    # The largest entry and one random direction (two central differences, four tight 30-s solves): every
+    # entry (ten solves, 271 s of CI's slow set) added no check that the direction does not make; each entry
+    # is checked against finite differences on the shorter horizon above.
     case = slider_crank(nx=4, n_modes=2, t1=30.0, t_ramp=2.0)
-    assert_gradient_agrees(case, case.initial_design(0.5), n_entries=case.n_design)
+    assert_gradient_agrees(case, case.initial_design(0.5))
