@@ -13,7 +13,7 @@ The rod is reduced (a small mesh, few modes, a short motion, few MMA steps) so t
 minutes on a 2-core machine: say so where the numbers are quoted.
 
 Usage: `python benchmarks/bench_stress_limited.py [--nx 24 --ny 4 --modes 4 --t1 1.0 --iters 25
---limited-iters 40 --limit-factor 0.85 --reuse]`. Writes the
+--limited-iters 40 --limit-factor 0.85 --reuse --out DIR]`. Writes the
 RESULTS.md section "Stress-limited rod (issue 31)" (default settings only).
 """
 
@@ -59,13 +59,15 @@ def main():
     parser.add_argument("--limited-iters", type=int, default=40, help="MMA steps of the stress-limited run")
     parser.add_argument("--limit-factor", type=float, default=0.85)
     parser.add_argument("--reuse", action="store_true", help="reuse the stored compliance-optimal design")
+    parser.add_argument("--out", default=str(OUT), help="folder of the pictures, the designs and summary.json")
     args = parser.parse_args()
-    OUT.mkdir(parents=True, exist_ok=True)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     case = fj.cases.slider_crank(args.nx, args.ny, args.modes, args.t1)
     filt = fj.DensityFilter(case.design, 1.5)
     volume = fj.VolumeConstraint(0.5, x_min=case.material.x_min, filter=filt)
 
-    stored = OUT / "compliance_design.npz"
+    stored = out / "compliance_design.npz"
     if args.reuse and stored.exists():
         x_plain, wall_plain = np.load(stored)["x_phys"], float(np.load(stored)["wall_s"])
     else:
@@ -85,15 +87,15 @@ def main():
     vmax = max(peak_plain.max(), peak_limited.max())
     for name, x, peak in (("compliance", x_plain, peak_plain), ("stress_limited", x_limited, peak_limited)):
         ax = fj.plot_design(case, x, title=f"{name.replace('_', '-')} design, volume {np.mean(x):.3f}")
-        ax.figure.savefig(OUT / f"density_{name}.png", dpi=120)
+        ax.figure.savefig(out / f"density_{name}.png", dpi=120)
         ax = fj.plot_peak_stress(case, peak, limit=limit, vmax=vmax,
                               title=f"peak relaxed von Mises, {name.replace('_', '-')} design")
-        ax.figure.savefig(OUT / f"peak_von_mises_{name}.png", dpi=120)
+        ax.figure.savefig(out / f"peak_von_mises_{name}.png", dpi=120)
     summary = dict(settings=vars(args), limit=limit, compliance=stats_plain, stress_limited=stats_limited,
                    psi_ratio=stats_limited["psi"] / stats_plain["psi"],
                    g_final=[float(g) for g in limited.constraints], descriptions=list(limited.descriptions),
                    feasible=bool(limited.feasible), wall_s=[wall_plain, wall_limited])
-    (OUT / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
     print(json.dumps(summary, indent=2))
     return summary
 
