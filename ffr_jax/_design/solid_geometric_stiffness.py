@@ -119,7 +119,7 @@ def solid_centrifugal_geometric_stiffness(model: SolidFEModel, youngs, densities
       body statically (six rigid motions removed), else `K_ff` is singular.
 
     **Returns:** `K_k = Phi^T K_G(sigma_k) Phi`, `(6, n_q, n_q)`, each symmetric, in the order of
-    [`angular_velocity_products`][]: `K_geo(omega) = sum_k pi_k(omega) K_k`.
+    `angular_velocity_products` (this module): `K_geo(omega) = sum_k pi_k(omega) K_k`.
     """
     _check_hexahedral(model)
     fixed = np.unique(np.asarray(fixed_dofs, dtype=np.int64))
