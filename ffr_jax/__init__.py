@@ -83,6 +83,13 @@ from ._spatial._point_on_line import SpatialPointOnLine as SpatialPointOnLine
 from ._spatial._point_on_plane import SpatialPointOnPlane as SpatialPointOnPlane
 from ._spatial._revolute import SpatialRevolute as SpatialRevolute
 from ._spatial._spherical import SphericalJoint as SphericalJoint
+from ._spatial._universal import SpatialUniversal as SpatialUniversal
+from ._spatial._cylindrical import SpatialCylindrical as SpatialCylindrical
+from ._spatial._prismatic import SpatialPrismatic as SpatialPrismatic
+from ._spatial._rigid_attachment import SpatialRigidAttachment as SpatialRigidAttachment
+from ._spatial._translation_driver import SpatialTranslationDriver as SpatialTranslationDriver
+from ._spatial._spring_damper import SpatialSpringDamper as SpatialSpringDamper
+from ._spatial._applied_force import SpatialAppliedForce as SpatialAppliedForce
 from ._sensitivity._adjoint import Adjoint as Adjoint
 from ._sensitivity._autodiff import Autodiff as Autodiff
 from ._sensitivity._backsolve import Backsolve as Backsolve
