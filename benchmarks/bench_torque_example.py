@@ -9,7 +9,8 @@ output times and the P-norm before (uniform design) and after, and pictures of t
 
 A reduced coupler mesh, few modes and few MMA steps (2-core machine): say so where the numbers are quoted.
 
-Usage: `python benchmarks/bench_torque_example.py [--nx 24 --ny 4 --modes 4 --t1 1.5 --iters 20]`.
+Usage: `python benchmarks/bench_torque_example.py [--nx 24 --ny 4 --modes 4 --t1 1.5 --iters 20 --out DIR
+--directory RUN]` (`--directory`: checkpoints every 5 steps; run again with the same folder to resume a stopped run).
 """
 
 import argparse
@@ -40,8 +41,11 @@ def main():
     parser.add_argument("--t1", type=float, default=1.5)
     parser.add_argument("--iters", type=int, default=20)
     parser.add_argument("--power", type=float, default=8.0)
+    parser.add_argument("--out", default=str(OUT), help="folder of the pictures and summary.json")
+    parser.add_argument("--directory", help="run folder: checkpoints, resumed when it holds one")
     args = parser.parse_args()
-    OUT.mkdir(parents=True, exist_ok=True)
+    out_dir = pathlib.Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
     base = fj.cases.four_bar(args.nx, args.ny, args.modes, args.t1)
     case = base.with_objective(fj.JointLoad(base, DRIVER, "torque", args.power))
     filt = fj.DensityFilter(case.design, 1.5)
@@ -51,7 +55,10 @@ def main():
                    fj.MassConstraint(case.design, mass_half, lower=True, filter=filt)]
     fun = fj.make_objective(case, "adjoint", filter=filt, rtol=RTOL, atol=ATOL)
     start = time.perf_counter()
-    result = fj.optimize(fun, x0, fj.MMA(case.material.x_min), constraints, iterations=args.iters, progress=False)
+    run = pathlib.Path(args.directory) if args.directory else None
+    result = fj.optimize(fun, x0, fj.MMA(case.material.x_min), constraints, iterations=args.iters, progress=False,
+                         directory=run, resume=run is not None and run.exists() and any(run.iterdir()),
+                         checkpoint_every=5)
     wall = time.perf_counter() - start
     x_opt = np.asarray(filt(result.x))
 
@@ -74,13 +81,13 @@ def main():
     ax.set_xlabel("t [s]")
     ax.set_ylabel("driving torque [N m]")
     ax.legend()
-    figure.savefig(OUT / "torque.png", dpi=120)
+    figure.savefig(out_dir / "torque.png", dpi=120)
     ax = fj.plot_design(case, x_opt, title="coupler design minimising the peak driving torque (volume 0.5)")
-    ax.figure.savefig(OUT / "density_optimised.png", dpi=120)
+    ax.figure.savefig(out_dir / "density_optimised.png", dpi=120)
     summary = dict(settings=vars(args), **out, peak_ratio=out["optimised"]["peak_abs_torque"] /
                    out["uniform"]["peak_abs_torque"], descriptions=list(result.descriptions),
                    feasible=bool(result.feasible), psi_history=[float(v) for v in result.history.value], wall_s=wall)
-    (OUT / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     print(json.dumps(summary, indent=2))
     return summary
 
