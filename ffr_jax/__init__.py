@@ -28,6 +28,9 @@ from ._design import (H8 as H8, H11 as H11, Tet10 as Tet10, SolidMesh as SolidMe
                       free_modes_sparse as free_modes_sparse)
 from ._design.solid_groups import (PhysicalGroups as PhysicalGroups, read_solid_groups as read_solid_groups,
                                    solid_groups_from_meshio as solid_groups_from_meshio)
+from ._design.solid_domain import SolidDesignDomain as SolidDesignDomain
+from ._design.solid_designed_body import SolidDesignedBody as SolidDesignedBody, solid_designed_body as solid_designed_body
+from ._design.solid_design_map import SolidDesignMap as SolidDesignMap
 from ._api import check_gradient as check_gradient
 from ._app._gradient_plot import plot_field as plot_field, plot_gradient as plot_gradient
 from ._app._animation import animate as animate

@@ -9,6 +9,8 @@ from scipy.spatial import cKDTree
 from .designed_body import DesignedBody
 from .domain import DesignDomain
 from .mesh import StructuredGrid
+from .solid_designed_body import SolidDesignedBody
+from .solid_domain import SolidDesignDomain
 
 
 class DensityFilter(eqx.Module):
@@ -29,7 +31,10 @@ class DensityFilter(eqx.Module):
     with weight 0), leaves of the pytree.
 
     **Arguments:**
-    - `domain`: the [`DesignDomain`][], or a [`DesignedBody`][] (its domain; e.g. `case.design`).
+    - `domain`: the [`DesignDomain`][], or a [`DesignedBody`][] (its domain; e.g. `case.design`); or, for a
+      solid part, a [`SolidDesignDomain`][] or [`SolidDesignedBody`][]: then centroids are 3-D, `a_i` the
+      element volumes, `scale` three lengths (default `(h, h, h)`, `h` the cube root of the mean volume) and
+      `scale=(1, 1, 1)` takes the radius in metres.
     - `radius`: `r >= 0`, in units of `scale` (by default: in element sizes).
     - `scale`: `(sx, sy)`: distances are measured in `(dx / sx, dy / sy)`. Default: the element
       size — `(L / nx, h / ny)` on a `StructuredGrid` (the rod: `1.5` reaches the 8 nearest
@@ -54,22 +59,27 @@ class DensityFilter(eqx.Module):
     weights: Float[Array, "n_design n_neighbours"]
     areas: Float[Array, " n_design"]
 
-    def __init__(self, domain: DesignDomain | DesignedBody, radius: float, scale=None):
-        if isinstance(domain, DesignedBody):
+    def __init__(self, domain: DesignDomain | DesignedBody | SolidDesignDomain | SolidDesignedBody, radius: float,
+                 scale=None):
+        if isinstance(domain, (DesignedBody, SolidDesignedBody)):
             domain = domain.domain
-        if not isinstance(domain, DesignDomain):
-            raise TypeError(f"DensityFilter takes a DesignDomain or a DesignedBody (e.g. case.design), got "
-                            f"{type(domain).__name__}.")
+        if not isinstance(domain, (DesignDomain, SolidDesignDomain)):
+            raise TypeError(f"DensityFilter takes a DesignDomain or a DesignedBody (e.g. case.design), or their solid "
+                            f"counterparts, got {type(domain).__name__}.")
         if not (radius >= 0.0 and np.isfinite(radius)):
             raise ValueError(f"The filter radius must be a finite non-negative number of element sizes, got {radius}; "
                              "radius=0 means no filtering (1.5 takes the 8 nearest neighbours on a grid).")
         centres, areas = domain.design_centroids(), domain.design_areas()
         if scale is None:
             mesh = domain.mesh
-            scale = (mesh.dx, mesh.dy) if isinstance(mesh, StructuredGrid) else (np.sqrt(np.mean(areas)),) * 2
+            if isinstance(domain, SolidDesignDomain):
+                scale = (np.cbrt(np.mean(areas)),) * 3
+            else:
+                scale = (mesh.dx, mesh.dy) if isinstance(mesh, StructuredGrid) else (np.sqrt(np.mean(areas)),) * 2
         scale = np.asarray(scale, dtype=float)
-        if scale.shape != (2,) or not np.all((scale > 0) & np.isfinite(scale)):
-            raise ValueError(f"scale must be two positive lengths (sx, sy), got {scale}.")
+        dim = centres.shape[1]
+        if scale.shape != (dim,) or not np.all((scale > 0) & np.isfinite(scale)):
+            raise ValueError(f"scale must be {dim} positive lengths (one per axis of the mesh), got {scale}.")
         centres = centres / scale
         n = centres.shape[0]
         rows = cKDTree(centres).query_ball_point(centres, r=radius) if radius > 0 else [[e] for e in range(n)]

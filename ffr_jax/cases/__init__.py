@@ -12,3 +12,5 @@ from ._rod import rod_body as rod_body
 from ._spatial_four_bar import spatial_four_bar as spatial_four_bar
 from ._solid_rod import SolidRod as SolidRod, solid_rod as solid_rod
 from ._solid_slider_crank import solid_slider_crank as solid_slider_crank
+from ._connecting_rod import connecting_rod as connecting_rod, connecting_rod_slider_crank as connecting_rod_slider_crank
+from ._connecting_rod_mesh import connecting_rod_groups as connecting_rod_groups

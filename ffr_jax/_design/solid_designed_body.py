@@ -1,0 +1,151 @@
+"""A density-designed solid part: the pure map from its design vector to its spatial body data.
+
+`x -> x_e (roles) -> (E_e, rho_e) (SIMP) -> (K, M) -> (lam, Phi) (modes with supports) -> spatial body data`
+
+The 3-D counterpart of [`DesignedBody`][]. Supports, interface nodes (markers) and passive regions are named by the
+mesh's physical groups ([`PhysicalGroups`][]): no node or element is searched by position. Every stage is JAX and
+differentiable in the densities; the modes come from the dense, subspace-stable [`retained_eigenpairs`][] (its
+derivative divides only by gaps between retained and discarded eigenvalues), so the part must be small enough for
+a dense eigen-solution (a few thousand degrees of freedom).
+"""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._spatial._flexible_body_data import SpatialFlexibleBodyData
+from .._spatial._solid_body_data import solid_body_data
+from .element.h8 import H8
+from .element.solid_base import AbstractSolidElement
+from .material import SIMP
+from .modal.dense import retained_eigenpairs
+from .solid_assembly import SolidFEModel, SolidOperator, solid_dense_matrix
+from .solid_domain import SolidDesignDomain
+from .solid_groups import PhysicalGroups
+from .solid_modes import free_modes_dense
+
+_DIRECTIONS = {"x": 0, "y": 1, "z": 2}
+
+
+class SolidDesignedBody(eqx.Module):
+    """One density-designed solid part (module docstring). Build it with [`solid_designed_body`][].
+
+    **Fields:** `model` the [`SolidFEModel`][]; `domain` the [`SolidDesignDomain`][]; `material` the [`SIMP`][] law;
+    `n_modes` retained eigenmodes (static); `fixed_dofs` the held degrees of freedom (static, sorted; empty: free-free
+    modes, the six rigid-body modes removed); `markers` (static) the joint points, each a tuple of nodes (a point at
+    their centroid, rotating with their rigid fit; see [`solid_body_data`][]).
+
+    Every method is a pure function of `x` `(n_design,)`; pass the body as an argument of compiled functions.
+    """
+
+    model: SolidFEModel
+    domain: SolidDesignDomain
+    material: SIMP
+    n_modes: int = eqx.field(static=True)
+    fixed_dofs: tuple[int, ...] = eqx.field(static=True)
+    markers: tuple[tuple[int, ...], ...] = eqx.field(static=True)
+
+    def __check_init__(self):
+        if self.model.mesh != self.domain.mesh:
+            raise ValueError("The solid FE model and the design domain must be built on the same mesh.")
+        free = self.model.n_dof - len(self.fixed_dofs) - (0 if self.fixed_dofs else 6)
+        if not isinstance(self.n_modes, int) or not 0 < self.n_modes < free:
+            raise ValueError(f"n_modes={self.n_modes} must be a positive int below the {free} free degrees of freedom "
+                             "(less the six rigid-body modes of a free part).")
+
+    @property
+    def mesh(self):
+        return self.model.mesh
+
+    @property
+    def n_design(self) -> int:
+        return self.domain.n_design
+
+    def initial_design(self, value: float = 0.5):
+        """A uniform design `x_e = value`, `(n_design,)`."""
+        if not self.material.x_min <= float(value) <= 1.0:
+            raise ValueError(f"Design value {value} lies outside [x_min, 1] = [{self.material.x_min}, 1].")
+        return self.domain.initial_design(value)
+
+    def check(self, x, body: str | None = None):
+        """Validate a design: shape at trace time; NaN and the bounds `[x_min, 1]` at run time."""
+        return self.domain.check(x, self.material.x_min, body)
+
+    def element_values(self, x):
+        """`(E_e, rho_e)`, `(n_elements,)` each: SIMP of `x` on design elements, of 1 / `x_min` on passive ones."""
+        xe = self.domain.element_densities(self.check(x), self.material.x_min)
+        return self.material.youngs(xe), self.material.densities(xe)
+
+    def matrices(self, x) -> tuple[SolidOperator, SolidOperator]:
+        """Matrix-free `(K(x), M(x))` of the whole part (no supports removed)."""
+        youngs, densities = self.element_values(x)
+        return self.model.stiffness(youngs), self.model.mass(densities)
+
+    def eigenpairs(self, x):
+        """`(lam, Phi)`: the `n_modes` lowest `omega^2` `(n_modes,)` and M-orthonormal modes `(n_dof, n_modes)`,
+        zero on the held degrees of freedom (with no supports: the lowest elastic modes of the free part)."""
+        youngs, densities = self.element_values(x)
+        if not self.fixed_dofs:
+            return free_modes_dense(self.model, youngs, densities, self.n_modes)
+        free = np.setdiff1d(np.arange(self.model.n_dof), self.fixed_dofs)
+        k = solid_dense_matrix(self.model, youngs, "stiffness")[np.ix_(free, free)]
+        m = solid_dense_matrix(self.model, densities, "mass")[np.ix_(free, free)]
+        lam, phi = retained_eigenpairs(0.5 * (k + k.T), 0.5 * (m + m.T), self.n_modes)
+        return lam, jnp.zeros((self.model.n_dof, self.n_modes), phi.dtype).at[free].set(phi)
+
+    def frequencies(self, x):
+        """Eigenfrequencies of the retained modes in Hz, `(n_modes,)`."""
+        return jnp.sqrt(self.eigenpairs(x)[0]) / (2 * jnp.pi)
+
+    def body_data(self, x) -> SpatialFlexibleBodyData:
+        """The spatial body data of the part at design `x` ([`solid_body_data`][] of `K(x)`, `M(x)`, `Phi(x)`)."""
+        k, m = self.matrices(x)
+        _, modes = self.eigenpairs(x)
+        return solid_body_data(self.mesh.nodes, k, m, modes, self.markers, elements=self.mesh.elements)
+
+
+def _supports(groups: PhysicalGroups, supports) -> tuple[int, ...]:
+    if not isinstance(supports, dict):
+        raise TypeError(f"supports must be a dict {{group name: directions}}, e.g. {{'big_bore': 'xyz'}}, got "
+                        f"{supports!r}.")
+    fixed = []
+    for name, directions in supports.items():
+        if not isinstance(directions, str) or not directions or set(directions) - set(_DIRECTIONS):
+            raise ValueError(f"supports[{name!r}] must name the held directions as a string of 'x', 'y', 'z' (e.g. "
+                             f"'xyz' or 'yz'), got {directions!r}.")
+        nodes = np.asarray(groups.nodes(name))
+        fixed.extend(int(3 * n + _DIRECTIONS[d]) for n in nodes for d in set(directions))
+    return tuple(sorted(set(fixed)))
+
+
+def solid_designed_body(groups: PhysicalGroups, n_modes: int, *, markers: tuple[str, ...], supports=None,
+                        solid: tuple[str, ...] = (), void: tuple[str, ...] = (),
+                        element: AbstractSolidElement = H8(), poisson: float = 0.3,
+                        material: SIMP = SIMP()) -> SolidDesignedBody:
+    """A density-designed solid part from a mesh with named physical groups.
+
+    **Arguments:**
+    - `groups`: the mesh and its [`PhysicalGroups`][] (e.g. [`read_solid_groups`][]`("part.msh")`).
+    - `n_modes`: retained eigenmodes.
+    - `markers`: names of the groups (e.g. bore surfaces) whose nodes are the joint points, in marker order.
+    - `supports`: `{group name: held directions}`, e.g. `{"big_bore": "xyz", "small_bore": "yz"}`: the directions
+      held at every node of the group while computing the modes (the reference conditions of the floating frame:
+      they must remove the six rigid-body motions). `None` (default): free-free modes.
+    - `solid`, `void`: names of physical volumes that are passive solid or passive void (no design variable).
+    - `element`: [`H8`][] (default), [`H11`][] or [`Tet10`][] (matching the mesh); `poisson`; `material`.
+
+    **Returns:** a [`SolidDesignedBody`][].
+
+    **Raises** `ValueError` for an unknown group name (listing the mesh's groups), a group of the wrong dimension, an
+    interface face not on the part's surface, and an unknown direction.
+    """
+    if not isinstance(groups, PhysicalGroups):
+        raise TypeError(f"groups must be PhysicalGroups (fj.read_solid_groups), got {type(groups).__name__}.")
+    if isinstance(markers, str) or not isinstance(markers, tuple) or not markers:
+        raise ValueError(f"markers must be a non-empty tuple of group names, e.g. ('big_bore', 'small_bore'), got "
+                         f"{markers!r}.")
+    marker_nodes = tuple(groups.nodes(name) for name in markers)
+    fixed = () if supports is None else _supports(groups, supports)
+    domain = SolidDesignDomain.from_groups(groups, solid=solid, void=void)
+    model = SolidFEModel(groups.mesh, element, poisson)
+    return SolidDesignedBody(model, domain, material, n_modes, fixed, marker_nodes)

@@ -1,0 +1,120 @@
+"""Element roles of a solid mesh (design / passive solid / passive void), passive regions named by physical groups."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from .._checks import DESIGN_SLACK, design_array, design_values, is_traced
+from .._errors import DesignError, error_if
+from .domain import DESIGN, SOLID, VOID
+from .element.solid_base import _format_ids
+from .solid_groups import PhysicalGroups
+from .solid_mesh import SolidMesh
+
+
+class SolidDesignDomain(eqx.Module):
+    """Which elements of a solid mesh carry a design variable, and which are passive solid or void.
+
+    The 3-D counterpart of [`DesignDomain`][]: the design vector `x` holds one density per design element, in
+    ascending element order; passive solid elements have `x_e = 1`, passive void ones `x_e = x_min`, and neither
+    carries a design variable (no gradient reaches them). Build it with [`SolidDesignDomain.from_groups`][] (passive
+    regions by the names of the mesh's physical volumes: no searching of elements by position) or from masks.
+
+    **Fields:** `mesh` (static), `roles` `(n_elements,)` (`DESIGN = 0`, `SOLID = 1`, `VOID = 2`),
+    `design_elements` `(n_design,)` the element of each design variable, `n_design` (static).
+    """
+
+    mesh: SolidMesh = eqx.field(static=True)
+    roles: Int[Array, " n_elements"]
+    design_elements: Int[Array, " n_design"]
+    n_design: int = eqx.field(static=True)
+
+    def __init__(self, mesh: SolidMesh, roles=None):
+        if not isinstance(mesh, SolidMesh):
+            raise TypeError(f"mesh must be a SolidMesh (box_grid, read_solid_mesh), got {type(mesh).__name__}.")
+        roles = np.zeros(mesh.n_elements, dtype=np.int8) if roles is None else np.asarray(roles)
+        if roles.shape != (mesh.n_elements,):
+            raise ValueError(f"roles must have shape ({mesh.n_elements},) (one per element), got {roles.shape}.")
+        bad = np.flatnonzero(~np.isin(roles, (DESIGN, SOLID, VOID)))
+        if bad.size:
+            raise ValueError(f"roles must be DESIGN (0), SOLID (1) or VOID (2); elements {_format_ids(bad)} are not.")
+        design = np.flatnonzero(roles == DESIGN)
+        if design.size == 0:
+            raise ValueError("The solid design domain has no design element (every element is passive).")
+        self.mesh = mesh
+        self.roles = jnp.asarray(roles, dtype=jnp.int8)
+        self.design_elements = jnp.asarray(design, dtype=jnp.int32)
+        self.n_design = int(design.size)
+
+    @classmethod
+    def from_masks(cls, mesh: SolidMesh, solid=None, void=None) -> "SolidDesignDomain":
+        """Roles from boolean element masks `(n_elements,)`: `solid` and `void` (disjoint), the rest design."""
+        roles = np.zeros(mesh.n_elements, dtype=np.int8)
+        for name, mask, role in (("solid", solid, SOLID), ("void", void, VOID)):
+            if mask is None:
+                continue
+            mask = np.asarray(mask)
+            if mask.shape != (mesh.n_elements,) or mask.dtype != bool:
+                raise ValueError(f"The {name} mask must be a boolean array of shape ({mesh.n_elements},), "
+                                 f"got {mask.dtype} {mask.shape}.")
+            clash = np.flatnonzero(mask & (roles != DESIGN))
+            if clash.size:
+                raise ValueError(f"Elements {_format_ids(clash)} are marked both solid and void.")
+            roles[mask] = role
+        return cls(mesh, roles)
+
+    @classmethod
+    def from_groups(cls, groups: PhysicalGroups, solid: tuple[str, ...] = (),
+                    void: tuple[str, ...] = ()) -> "SolidDesignDomain":
+        """Passive regions by name: the elements of the physical volumes `solid` are passive solid, those of `void`
+        passive void, the rest design. An unknown name or a surface group is a `ValueError` naming the groups."""
+        if not isinstance(groups, PhysicalGroups):
+            raise TypeError(f"groups must be PhysicalGroups (fj.read_solid_groups), got {type(groups).__name__}.")
+        masks = {}
+        for label, names in (("solid", solid), ("void", void)):
+            if isinstance(names, str):
+                names = (names,)
+            mask = np.zeros(groups.mesh.n_elements, dtype=bool)
+            for name in names:
+                mask[groups.elements(name)] = True
+            masks[label] = mask
+        return cls.from_masks(groups.mesh, **masks)
+
+    def design_centroids(self) -> np.ndarray:
+        """Centroids `(n_design, 3)` of the design elements (mean of their nodes), in design order."""
+        return self.mesh.element_coordinates().mean(axis=1)[np.asarray(self.design_elements)]
+
+    def design_areas(self) -> np.ndarray:
+        """Volumes `(n_design,)` of the design elements (the volume weights; named as the planar domain's areas so
+        that [`DensityFilter`][] and [`VolumeConstraint`][] take either), in design order."""
+        return self.mesh.element_volumes()[np.asarray(self.design_elements)]
+
+    def initial_design(self, value: float = 0.5) -> Float[Array, " n_design"]:
+        """A uniform design `x_e = value`."""
+        return jnp.full((self.n_design,), float(value))
+
+    def check(self, x, x_min: float, body: str | None = None) -> Float[Array, " n_design"]:
+        """Validate a design as [`DesignDomain.check`][]: dtype and shape at trace time, NaN, inf and the bounds
+        `[x_min, 1]` at once when concrete, else at run time; a [`DesignError`][] otherwise."""
+        of_body = "" if body is None else f" for body {body!r}"
+        x = design_array(x, of_body)
+        if x.shape != (self.n_design,):
+            raise DesignError(
+                f"Design vector has shape {x.shape}, expected ({self.n_design},){of_body}: one density per design "
+                f"element ({self.mesh.n_elements} elements, {self.mesh.n_elements - self.n_design} passive). "
+                "Use initial_design(value) for a valid vector.")
+        if not is_traced(x):
+            design_values(x, x_min, of_body)
+            return x
+        x = error_if(x, ~jnp.all(jnp.isfinite(x)), f"Design vector contains NaN or inf{of_body}; every density must "
+                     f"be a finite number in [x_min, 1] = [{x_min}, 1].", DesignError)
+        return error_if(
+            x, jnp.any((x < x_min - DESIGN_SLACK) | (x > 1.0 + DESIGN_SLACK)),
+            f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; clip or project the design first.",
+            DesignError)
+
+    def element_densities(self, x, x_min: float) -> Float[Array, " n_elements"]:
+        """All element densities `(n_elements,)`: `x` on design elements, 1 on solid, `x_min` on void."""
+        passive = jnp.where(self.roles == SOLID, 1.0, jnp.where(self.roles == VOID, x_min, 0.0)).astype(x.dtype)
+        return passive.at[self.design_elements].set(x)
