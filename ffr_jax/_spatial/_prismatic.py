@@ -27,9 +27,9 @@ class SpatialPrismatic(AbstractConstraint):
     **Arguments:**
     - `body_i`, `marker_i`, `axis_i`: the sliding body, its marker and sliding axis `(3,)` (body frame).
     - `body_j`, `marker_j`, `axis_j`: the guide (or `-1`: the ground), its marker and axis (default: `axis_i`).
-    - `normal_i`, `normal_j`: `(3,)` directions at right angles to `axis_i`, `axis_j` that stay parallel (default:
-      one normal of `axis_i` for both, when `axis_j` is not given: the bodies keep the relative orientation in
-      which their frames are parallel).
+    - `normal_i`, `normal_j`: `(3,)` directions at right angles to `axis_i`, `axis_j` that stay parallel (required
+      when the axes differ; for one axis, either one given serves for both, and by default one normal of the axis
+      does: the bodies keep the relative orientation in which their frames are parallel).
     - `point`: `(3,)` a point of the ground axis when `body_j = -1`.
 
     Raises `ValueError` for an axis of zero length, a normal that is not perpendicular to its axis, or different
@@ -51,18 +51,16 @@ class SpatialPrismatic(AbstractConstraint):
         a_i = unit_axis(axis_i, "SpatialPrismatic axis_i")
         a_j = a_i if axis_j is None else unit_axis(axis_j, "SpatialPrismatic axis_j")
         same_axis = axis_j is None or np.allclose(a_i, a_j, rtol=0.0, atol=1e-14)
-        if normal_i is None and normal_j is None and not same_axis:
+        if not same_axis and (normal_i is None or normal_j is None):
             raise ValueError("SpatialPrismatic with axis_i != axis_j needs normal_i and normal_j: a direction at right "
                              "angles to each axis, the two parallel in the assembled configuration (they fix the "
                              "relative rotation about the axis).")
-        default = normals(a_i)[0]
-        n_i = default if normal_i is None else perpendicular_unit(normal_i, a_i, "SpatialPrismatic normal_i")
-        if normal_j is None:
-            if not same_axis:
-                raise ValueError("SpatialPrismatic with axis_i != axis_j needs normal_j as well as normal_i.")
-            n_j = n_i
-        else:
+        n_i = n_j = normals(a_i)[0]
+        if normal_i is not None:
+            n_i = n_j = perpendicular_unit(normal_i, a_i, "SpatialPrismatic normal_i")
+        if normal_j is not None:
             n_j = perpendicular_unit(normal_j, a_j, "SpatialPrismatic normal_j")
+            n_i = n_j if normal_i is None else n_i
         self.axis_i = jnp.asarray(a_i)
         self.normal_i = jnp.asarray(n_i)
         self.normals_j = jnp.asarray(np.stack([n_j, np.cross(a_j, n_j)]))

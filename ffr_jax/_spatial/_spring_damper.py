@@ -45,6 +45,7 @@ class SpatialSpringDamper(AbstractForce):
 
     def length(self, t, y_r, scene):
         """`l = |r_i(P) - r_j(Q)|`."""
+        require_spatial(scene, (self.body_i, self.body_j), "SpatialSpringDamper")
         d = scene.marker_position(self.body_i, self.marker_i, y_r) - other_point(self, t, y_r, scene)
         return jnp.sqrt(d @ d)
 
