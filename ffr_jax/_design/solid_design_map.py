@@ -30,6 +30,15 @@ class SolidDesignMap(AbstractDesignMap):
         """The designed body (e.g. for `fj.DensityFilter(design_map.design, radius, scale=(1, 1, 1))`)."""
         return self.body
 
+    @property
+    def only(self) -> SolidDesignedBody:
+        """The designed body (the one a solid design map has)."""
+        return self.body
+
+    def frequencies(self, designs):
+        """Retained natural frequencies in Hz, `(n_modes,)`."""
+        return self.body.frequencies(self.check(designs))
+
     def initial_design(self, value=0.5):
         return self.body.initial_design(value)
 
