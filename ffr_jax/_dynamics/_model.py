@@ -24,7 +24,7 @@ import scipy.linalg
 
 from .._errors import SimulationError, branched_error_if
 from .._scene._scene import Scene
-from ._small_linalg import factored_solve, lu_factor, lu_solve, matmul, spd_solve
+from ._small_linalg import block_lu_factor, factored_solve, lu_factor, lu_solve, matmul, spd_solve
 
 
 class Partition(eqx.Module):
@@ -123,7 +123,13 @@ class MinimalModel(eqx.Module):
       iterations and the loop ends at once; unrolled iterations after convergence only refine.
     - `reference_conditioning`: the Hadamard ratio [`hadamard_ratio`][] of `C_d` at the initial
       state (set by [`Problem`][]); along the motion a ratio below `DEAD_POINT_RATIO` times it
-      (or below 1e-9 without a reference) is a dead point, an error.
+      (or below 1e-9 without a reference) is a dead point, an error. With `dependent_blocks`, the
+      product of the diagonal blocks' ratios ([`block_hadamard_ratio`][]).
+    - `dependent_blocks`: a static block lower-triangular structure of `C_d`, `((rows_k, cols_k), ...)`
+      (constraint rows, positions in `y_d`; see `_block_triangular`), or `None` (one dense block).
+      Newton's method then solves block after block, each with the earlier blocks' results, and the
+      solves with `C_d` are block substitutions: the same `y_d` to round-off at a fraction of the cost
+      of the dense system when a body's motion is prescribed (set by [`Problem`][]).
     """
 
     partition: Partition
@@ -133,6 +139,7 @@ class MinimalModel(eqx.Module):
     newton_iterations: int = eqx.field(static=True, default=25)
     newton_tol: float = eqx.field(static=True, default=1e-13)
     newton_unrolled: int = eqx.field(static=True, default=2)
+    dependent_blocks: tuple | None = eqx.field(static=True, default=None)
 
     # --- coordinates -------------------------------------------------------------------------
     def _assemble_runs(self):
@@ -179,7 +186,11 @@ class MinimalModel(eqx.Module):
         """`(C_i, c_t, LU of C_d)`: what the velocity and acceleration levels share."""
         c_t, c = jax.jacfwd(scene.constraint_residual, argnums=(0, 1))(t, y_r)
         c_i, c_d = self.split(c.T)
-        return c_i.T, c_t, lu_factor(c_d.T)
+        return c_i.T, c_t, self.factor(c_d.T)
+
+    def factor(self, c_d):
+        """Factors of `C_d` `(n_c, n_d)` for [`lu_solve`][]: by its blocks where `dependent_blocks` is set."""
+        return lu_factor(c_d) if self.dependent_blocks is None else block_lu_factor(c_d, self.dependent_blocks)
 
     def _dependent_velocities(self, z, c_i, c_t, lu):
         return -lu_solve(lu, matmul(c_i, z) + c_t)
@@ -302,44 +313,32 @@ _NOT_CONVERGED = (
 
 
 def _newton(model: MinimalModel, t, y, scene: Scene):
-    """Primal Newton iteration for `y_d`, with convergence and regularity checks."""
+    """Primal Newton iteration for `y_d`, with convergence and regularity checks.
+
+    With `model.dependent_blocks`, block after block: block `k`'s rows are solved for its coordinates with the
+    earlier blocks' results in place (the later blocks' coordinates do not enter them)."""
     guess = model.reference_dependent if model.dependent_guess is None else model.dependent_guess(t, y, scene)
     guess = jnp.asarray(guess, dtype=y.dtype)
 
     def residual(y_d):
         return scene.constraint_residual(t, model.assemble(y, y_d))
 
-    def iterate(y_d):
-        """One Newton step, and the Hadamard ratio `|det C_d| / prod |rows of C_d|` where it was taken."""
-        res, jac = residual(y_d), jax.jacfwd(residual)(y_d)
-        lu = lu_factor(jac)
-        step = lu_solve(lu, res)
-        hadamard = jnp.abs(lu.det()) / jnp.maximum(jnp.prod(jnp.linalg.norm(jac, axis=1)), 1e-300)
-        return y_d - step, jnp.max(jnp.abs(step)), hadamard
+    if model.dependent_blocks is None:
+        y_d, hadamard = _newton_block(model, residual, guess)
+    else:
+        blocks = model.dependent_blocks
+        values = [guess[np.asarray(cols)] for _, cols in blocks]
+        runs = _runs(tuple(sorted(((k, i) for k, (_, cols) in enumerate(blocks) for i in range(len(cols))),
+                                  key=lambda ki: blocks[ki[0]][1][ki[1]])))
+        hadamard = jnp.ones((), y.dtype)
+        for k, (rows, _) in enumerate(blocks):
+            def block_residual(x, k=k, rows=rows):
+                y_r = model.assemble(y, _gather_runs(values[:k] + [x] + values[k + 1:], runs))
+                return _rows_residual(scene, t, y_r, rows)
 
-    def converged(y_d, size, previous):
-        # The step size, or the error left after it estimated from the contraction rate
-        # theta = |step_k| / |step_k-1| (Hairer and Wanner, Sect. IV.8): theta / (1 - theta) |step_k|.
-        theta = size / previous
-        left = jnp.where((theta < 0.5) & jnp.isfinite(previous), theta / (1.0 - theta) * size, size)
-        return left <= model.newton_tol * (1.0 + jnp.max(jnp.abs(y_d)))
-
-    unrolled = max(1, min(model.newton_unrolled, model.newton_iterations))
-    y_d, size = guess, jnp.asarray(jnp.inf, y.dtype)
-    for _ in range(unrolled):
-        previous = size
-        y_d, size, hadamard = iterate(y_d)
-    if model.newton_iterations > unrolled:
-        def body(carry):
-            y_d, size, _, _, k = carry
-            y_d, new_size, hadamard = iterate(y_d)
-            return y_d, new_size, size, hadamard, k + 1
-
-        def cond(carry):
-            y_d, size, previous, _, k = carry
-            return (k < model.newton_iterations) & ~converged(y_d, size, previous)
-
-        y_d, size, _, hadamard, _ = jax.lax.while_loop(cond, body, (y_d, size, previous, hadamard, unrolled))
+            values[k], ratio = _newton_block(model, block_residual, values[k])
+            hadamard = hadamard * ratio
+        y_d = _gather_runs(values, runs)
     # Regularity is judged at the last Newton step. A blown-up or NaN run is a convergence failure,
     # not a singular partition: NaN fails `hadamard <= ...` and the residual test below catches it.
     scale = 1.0 + jnp.max(jnp.abs(model.assemble(y, y_d)))
@@ -350,6 +349,61 @@ def _newton(model: MinimalModel, t, y, scene: Scene):
     return branched_error_if(
         y_d, singular | not_converged, jnp.where(singular, 0, 1), (_SINGULAR, _NOT_CONVERGED), SimulationError
     )
+
+
+def _rows_residual(scene: Scene, t, y_r, rows: tuple[int, ...]):
+    """Rows `rows` of `c(y_r, t, p)`, evaluating only the constraints that own them."""
+    starts = np.cumsum([0] + [c.n_equations for c in scene.constraints])
+    owners = sorted({int(np.searchsorted(starts, r, side="right")) - 1 for r in rows})
+    local = np.concatenate([np.arange(starts[k], starts[k + 1]) for k in owners])
+    values = jnp.concatenate([scene.constraints[k].residual(t, y_r, scene) for k in owners])
+    position = {int(r): i for i, r in enumerate(local)}
+    return _gather_runs((values,), _runs(tuple((0, position[r]) for r in rows)))
+
+
+def _newton_block(model: MinimalModel, residual, guess):
+    """Newton's method on `residual(x) = 0` from `guess`: `(x, Hadamard ratio of the Jacobian at the last step)`."""
+    def iterate(x):
+        """One Newton step, and the Hadamard ratio `|det C_d| / prod |rows of C_d|` where it was taken."""
+        res, jac = residual(x), jax.jacfwd(residual)(x)
+        lu = lu_factor(jac)
+        step = lu_solve(lu, res)
+        hadamard = jnp.abs(lu.det()) / jnp.maximum(jnp.prod(jnp.linalg.norm(jac, axis=1)), 1e-300)
+        return x - step, jnp.max(jnp.abs(step)), hadamard
+
+    def converged(x, size, previous):
+        # The step size, or the error left after it estimated from the contraction rate
+        # theta = |step_k| / |step_k-1| (Hairer and Wanner, Sect. IV.8): theta / (1 - theta) |step_k|.
+        theta = size / previous
+        left = jnp.where((theta < 0.5) & jnp.isfinite(previous), theta / (1.0 - theta) * size, size)
+        return left <= model.newton_tol * (1.0 + jnp.max(jnp.abs(x)))
+
+    unrolled = max(1, min(model.newton_unrolled, model.newton_iterations))
+    x, size = guess, jnp.asarray(jnp.inf, guess.dtype)
+    for _ in range(unrolled):
+        previous = size
+        x, size, hadamard = iterate(x)
+    if model.newton_iterations > unrolled:
+        def body(carry):
+            x, size, _, _, k = carry
+            x, new_size, hadamard = iterate(x)
+            return x, new_size, size, hadamard, k + 1
+
+        def cond(carry):
+            x, size, previous, _, k = carry
+            return (k < model.newton_iterations) & ~converged(x, size, previous)
+
+        x, size, _, hadamard, _ = jax.lax.while_loop(cond, body, (x, size, previous, hadamard, unrolled))
+    return x, hadamard
+
+
+def block_hadamard_ratio(matrix, blocks) -> float:
+    """The product of the [`hadamard_ratio`][]s of the diagonal blocks `matrix[rows_k][:, cols_k]` (NumPy); that of
+    `matrix` for `blocks=None`: the conditioning that Newton's method by blocks reports."""
+    if blocks is None:
+        return hadamard_ratio(matrix)
+    matrix = np.asarray(matrix, dtype=float)
+    return float(np.prod([hadamard_ratio(matrix[np.ix_(rows, cols)]) for rows, cols in blocks]))
 
 
 def hadamard_ratio(matrix) -> float:
@@ -384,7 +438,7 @@ def _solve_dependent_jvp(primals, tangents):
         lambda t_, y_, dyn_: residual(t_, y_, eqx.combine(dyn_, static)), (t, y, dyn), (dt, dy, ddyn)
     )
     c_d = jax.jacfwd(lambda yd: scene.constraint_residual(t, model.assemble(y, yd)))(y_d)
-    return y_d, -lu_solve(lu_factor(c_d), dres)
+    return y_d, -lu_solve(model.factor(c_d), dres)
 
 
 @eqx.filter_custom_jvp

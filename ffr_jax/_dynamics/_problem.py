@@ -6,7 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._model import MinimalModel, Partition, _constraint_jacobian, choose_partition, hadamard_ratio
+from ._block_triangular import dependent_blocks
+from ._model import MinimalModel, Partition, _constraint_jacobian, block_hadamard_ratio, choose_partition
 from .._objective._objective import Objective, as_objective
 from .._scene._body_data import BodyData, _check_body_data
 from .._scene._references import check_references
@@ -103,12 +104,14 @@ class Problem(eqx.Module):
         if redundant_velocities is not None:
             _check_velocities(model, scene, z_r0, redundant_velocities)
         # The conditioning of C_d at the start: the reference of the dead-point test along the motion.
-        conditioning = None
+        conditioning, blocks = None, None
         if partition.dependent:
+            blocks = dependent_blocks(scene, t0, y_r0, partition.dependent)
             c = np.asarray(_constraint_jacobian(scene, jnp.asarray(t0, float), jnp.asarray(y_r0)))
-            conditioning = jnp.asarray(hadamard_ratio(c[:, list(partition.dependent)]))
+            conditioning = jnp.asarray(block_hadamard_ratio(c[:, list(partition.dependent)], blocks))
         model = MinimalModel(partition=partition, reference_dependent=jnp.asarray(_split(partition, y_r0)[1]),
-                             dependent_guess=dependent_guess, reference_conditioning=conditioning)
+                             dependent_guess=dependent_guess, reference_conditioning=conditioning,
+                             dependent_blocks=blocks)
         y0, z0 = jnp.asarray(y0), jnp.asarray(z0)
         self.scene, self.model = scene, model
         self.objective = as_objective(objective)

@@ -15,6 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
+import numpy as np
 
 # 16 rather than 12: the spatial slider-crank's 14 dependent coordinates (rod and driven crank, `R, p` each) made
 # `C_d` a LAPACK matrix, and under `jax.vmap` (the adjoint's quadrature, Jacobians by `jax.jacfwd`) batched LAPACK
@@ -99,6 +100,84 @@ def lu_factor(a) -> LU:
     return LU(lu=a, perm=perm, sign=sign)
 
 
+class BlockLU(eqx.Module):
+    """Factors of a square matrix `A` whose rows and columns permute to block lower-triangular form.
+
+    Block `k` is the submatrix `A[rows_k][:, cols_k]`; rows of block `k` have no entries in the columns of later
+    blocks. `diagonal[k]` is the [`LU`][] of block `k`, `lower[k]` the rows of block `k` in the columns of the
+    earlier blocks (in their order), `(n_k, sum_{j<k} n_j)`. Solves are block forward (or, transposed, backward)
+    substitution: `x_k = A_kk^-1 (b[rows_k] - A[rows_k, cols_<k] x_<k)`.
+    """
+
+    diagonal: tuple[LU, ...]
+    lower: tuple[jnp.ndarray, ...]
+    blocks: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = eqx.field(static=True)
+
+    @property
+    def n(self) -> int:
+        return sum(len(cols) for _, cols in self.blocks)
+
+    def det(self):
+        """`det A` (the product of the blocks' determinants and the signs of the two permutations)."""
+        rows = [r for rows, _ in self.blocks for r in rows]
+        cols = [c for _, cols in self.blocks for c in cols]
+        sign = _permutation_sign(rows) * _permutation_sign(cols)
+        out = jnp.asarray(float(sign), self.lower[0].dtype if self.lower else self.diagonal[0].lu.dtype)
+        for lu in self.diagonal:
+            out = out * lu.det()
+        return out
+
+    def solve(self, b, trans: int = 0):
+        """`A^-1 b` (`trans=0`) or `A^-T b` (`trans=1`); `b` is `(n,)` or `(n, m)`."""
+        sizes = [len(cols) for _, cols in self.blocks]
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        parts = []
+        if trans == 0:
+            for k, (rows, _) in enumerate(self.blocks):
+                rhs = b[np.asarray(rows)]
+                if k:
+                    done = parts[0] if k == 1 else jnp.concatenate(parts, axis=0)
+                    rhs = rhs - matmul(self.lower[k], done)
+                parts.append(lu_solve(self.diagonal[k], rhs))
+            order = [c for _, cols in self.blocks for c in cols]
+        else:
+            parts = [None] * len(self.blocks)
+            for k in reversed(range(len(self.blocks))):
+                rhs = b[np.asarray(self.blocks[k][1])]
+                for j in range(k + 1, len(self.blocks)):
+                    rhs = rhs - matmul(self.lower[j][:, offsets[k]:offsets[k + 1]].T, parts[j])
+                parts[k] = lu_solve(self.diagonal[k], rhs, trans=1)
+            order = [r for rows, _ in self.blocks for r in rows]
+        x = parts[0] if len(parts) == 1 else jnp.concatenate(parts, axis=0)
+        return x[np.argsort(order)]
+
+
+def _permutation_sign(order) -> int:
+    order, sign, seen = list(order), 1, set()
+    for start in range(len(order)):
+        if start in seen:
+            continue
+        length, i = 0, start
+        while i not in seen:
+            seen.add(i)
+            i = order[i]
+            length += 1
+        sign *= -1 if length % 2 == 0 else 1
+    return sign
+
+
+def block_lu_factor(a, blocks) -> BlockLU:
+    """[`BlockLU`][] of `a` for a static block lower-triangular structure `blocks = ((rows_k, cols_k), ...)`
+    (entries of `a` outside it are taken as zero): [`lu_factor`][] of each diagonal block."""
+    diagonal, lower, done = [], [], []
+    for rows, cols in blocks:
+        a_rows = a[np.asarray(rows)]
+        diagonal.append(lu_factor(a_rows[:, np.asarray(cols)]))
+        lower.append(a_rows[:, np.asarray(done, dtype=int)])
+        done.extend(cols)
+    return BlockLU(diagonal=tuple(diagonal), lower=tuple(lower), blocks=tuple(blocks))
+
+
 def matmul(a, b):
     """`a @ b` for tiny matrices (or a matrix and a vector), as a broadcast product and a sum.
 
@@ -118,8 +197,11 @@ def _safe(d):
     return jnp.where(d == 0, 1.0, d)
 
 
-def lu_solve(lu: LU, b, trans: int = 0):
-    """`A^-1 b` (`trans=0`) or `A^-T b` (`trans=1`) from [`lu_factor`][]; `b` is `(n,)` or `(n, m)`."""
+def lu_solve(lu: "LU | BlockLU", b, trans: int = 0):
+    """`A^-1 b` (`trans=0`) or `A^-T b` (`trans=1`) from [`lu_factor`][] or [`block_lu_factor`][]; `b` is `(n,)`
+    or `(n, m)`."""
+    if isinstance(lu, BlockLU):
+        return lu.solve(b, trans)
     n = lu.n
     vector = b.ndim == 1
     x = b[:, None] if vector else b
