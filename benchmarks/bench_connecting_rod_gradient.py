@@ -33,6 +33,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import ffr_jax as fj  # noqa: E402
+from ffr_jax._design.domain import DESIGN  # noqa: E402
 
 RTOL, ATOL = 1e-10, 1e-20
 H = 1e-4
@@ -79,6 +80,6 @@ for i in entries:
     print(f"entry {i}: adjoint {g_adj[i]:.10e}, autodiff {g_ad[i]:.10e}, central differences {fd:.10e}; "
           f"|adjoint - fd| / max|g| = {abs(g_adj[i] - fd) / scale:.1e} (bound 1e-4)", flush=True)
 print(f"central differences (6 objectives, first compiles): {time.perf_counter() - t:.1f} s")
-groups_web = int(np.count_nonzero(np.asarray(body.domain.roles) == fj.DESIGN))
+groups_web = int(np.count_nonzero(np.asarray(body.domain.roles) == DESIGN))
 print(f"passive: {body.mesh.n_elements - case.n_design} hub elements carry no design variable "
       f"(n_design = {case.n_design} = design-role elements {groups_web})")
