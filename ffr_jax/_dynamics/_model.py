@@ -129,7 +129,8 @@ class MinimalModel(eqx.Module):
       (constraint rows, positions in `y_d`; see `_block_triangular`), or `None` (one dense block).
       Newton's method then solves block after block, each with the earlier blocks' results, and the
       solves with `C_d` are block substitutions: the same `y_d` to round-off at a fraction of the cost
-      of the dense system when a body's motion is prescribed (set by [`Problem`][]).
+      of the dense system when a body's motion is prescribed (set by [`Problem`][]). Each block runs one
+      unrolled Newton iteration, then the loop.
     """
 
     partition: Partition
@@ -336,7 +337,7 @@ def _newton(model: MinimalModel, t, y, scene: Scene):
                 y_r = model.assemble(y, _gather_runs(values[:k] + [x] + values[k + 1:], runs))
                 return _rows_residual(scene, t, y_r, rows)
 
-            values[k], ratio = _newton_block(model, block_residual, values[k])
+            values[k], ratio = _newton_block(model, block_residual, values[k], unrolled=1)
             hadamard = hadamard * ratio
         y_d = _gather_runs(values, runs)
     # Regularity is judged at the last Newton step. A blown-up or NaN run is a convergence failure,
@@ -361,8 +362,13 @@ def _rows_residual(scene: Scene, t, y_r, rows: tuple[int, ...]):
     return _gather_runs((values,), _runs(tuple((0, position[r]) for r in rows)))
 
 
-def _newton_block(model: MinimalModel, residual, guess):
-    """Newton's method on `residual(x) = 0` from `guess`: `(x, Hadamard ratio of the Jacobian at the last step)`."""
+def _newton_block(model: MinimalModel, residual, guess, unrolled: int | None = None):
+    """Newton's method on `residual(x) = 0` from `guess`: `(x, Hadamard ratio of the Jacobian at the last step)`.
+
+    `unrolled` iterations (default `model.newton_unrolled`) before the loop. Blocks take one: a block of a prescribed
+    motion (a driven crank) is often solved exactly by the guess, and there a second unrolled iteration per block
+    costs more than the loop's convergence test (spatial slider-crank forward run 181 -> 127 ms CPU,
+    benchmarks/RESULTS.md, "Spatial slider-crank (issue 26)")."""
     def iterate(x):
         """One Newton step, and the Hadamard ratio `|det C_d| / prod |rows of C_d|` where it was taken."""
         res, jac = residual(x), jax.jacfwd(residual)(x)
@@ -378,7 +384,7 @@ def _newton_block(model: MinimalModel, residual, guess):
         left = jnp.where((theta < 0.5) & jnp.isfinite(previous), theta / (1.0 - theta) * size, size)
         return left <= model.newton_tol * (1.0 + jnp.max(jnp.abs(x)))
 
-    unrolled = max(1, min(model.newton_unrolled, model.newton_iterations))
+    unrolled = max(1, min(model.newton_unrolled if unrolled is None else unrolled, model.newton_iterations))
     x, size = guess, jnp.asarray(jnp.inf, guess.dtype)
     for _ in range(unrolled):
         previous = size

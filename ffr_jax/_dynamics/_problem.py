@@ -1,9 +1,12 @@
 """A multibody problem: scene, time span, initial state and objective of the motion."""
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import scipy.optimize
 from jaxtyping import Array, Float
 
 from ._block_triangular import dependent_blocks
@@ -215,14 +218,73 @@ def _assemble(model: MinimalModel, scene: Scene, t0: float, y0, z0) -> tuple[np.
     try:
         y_r0, z_r0 = _state(model, scene, jnp.asarray(t0), y0, z0)
     except eqx.EquinoxRuntimeError as err:
-        reason = "the constraint Jacobian is singular there" if "singular" in str(err) else \
-            "Newton's method found no solution near the given dependent positions"
+        # Newton's method on constraints without a solution ends at a fold (singular) or without converging: either
+        # way, least squares tells a mechanism that cannot close from a starting point too far from one that can.
+        independent = [names[i] for i in model.partition.independent]
+        gap, violated = _closest_assembly(model, scene, t0, y0)
+        if violated:
+            raise ValueError(
+                f"The mechanism cannot be assembled at the initial state: with the independent coordinates "
+                f"{independent} as given, no dependent positions satisfy the position constraints. At the closest "
+                f"configuration (least squares over the dependent coordinates) these stay violated: {violated} "
+                f"(largest residual {gap:.3g}). A link is too short or too long to span the distance between its "
+                "joints, or a joint point or axis is misplaced: check the lengths, joint points and axes of "
+                "those constraints' bodies, or start from other independent positions."
+            ) from None
+        if "singular" in str(err):
+            reason = "the constraint Jacobian is singular there"
+        else:
+            reason = (f"Newton's method found no solution near the given dependent positions, although the "
+                      f"constraints can be met (least squares reaches a residual of {gap:.1e})")
         raise ValueError(
             f"The initial positions cannot be made consistent: {reason}. The independent coordinates "
-            f"{[names[i] for i in model.partition.independent]} are kept as given; give dependent positions "
+            f"{independent} are kept as given; give dependent positions "
             f"{[names[i] for i in model.partition.dependent]} close to an assembled configuration."
         ) from None
     return np.asarray(y_r0), np.asarray(z_r0)
+
+
+@eqx.filter_jit
+def _residual(scene: Scene, t, y_r):
+    return scene.constraint_residual(t, y_r)
+
+
+def _closest_assembly(model: MinimalModel, scene: Scene, t0: float, y0) -> tuple[float, str]:
+    """Least squares over the dependent coordinates from the given ones: `(largest residual, the constraints still
+    violated there)`; no constraint named when the residual reaches round-off (the mechanism does assemble).
+
+    A residual is violated when it exceeds 1e-6 of the scale of the coordinates: Gauss-Newton (Levenberg-Marquardt)
+    reaches a zero residual to about `sqrt(eps) ~ 1e-8` relative even at a double root (a configuration that just
+    closes), and a mechanism that cannot close keeps a gap of its geometry's size.
+    """
+    dependent = list(model.partition.dependent)
+    y_r = np.asarray(model.reference_dependent, dtype=float)
+    base = np.zeros(scene.n_coordinates)
+    base[list(model.partition.independent)] = np.asarray(y0, dtype=float)
+    t = jnp.asarray(t0, float)
+
+    def full(y_d):
+        out = base.copy()
+        out[dependent] = y_d
+        return jnp.asarray(out)
+
+    fit = scipy.optimize.least_squares(
+        lambda y_d: np.asarray(_residual(scene, t, full(y_d))), y_r,
+        jac=lambda y_d: np.asarray(_constraint_jacobian(scene, t, full(y_d)))[:, dependent], method="lm",
+        xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200 * (len(dependent) + 1))
+    residual = np.asarray(_residual(scene, t, full(fit.x)))
+    gap = float(np.max(np.abs(residual), initial=0.0))
+    if not gap > 1e-6 * (1.0 + float(np.max(np.abs(fit.x), initial=0.0))):
+        return gap, ""
+    start, violated = 0, []
+    for k, c in enumerate(scene.constraints):
+        rows = residual[start:start + c.n_equations]
+        start += c.n_equations
+        if np.max(np.abs(rows), initial=0.0) > 1e-6 * (1.0 + float(np.max(np.abs(fit.x), initial=0.0))):
+            bodies = [f"{f.name} = {scene.bodies[v].name!r}" for f in dataclasses.fields(c)
+                      if f.name.startswith("body") and isinstance(v := getattr(c, f.name), int) and v >= 0]
+            violated.append(f"constraint {k} {type(c).__name__}({', '.join(bodies)}) by {np.array2string(rows, precision=3)}")
+    return gap, "; ".join(violated)
 
 
 def _check_velocities(model, scene, z_r0, given) -> None:
