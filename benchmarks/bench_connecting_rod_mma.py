@@ -31,6 +31,7 @@ parser.add_argument("--modes", type=int, default=2)
 parser.add_argument("--t1", type=float, default=0.04)
 parser.add_argument("--radius", type=float, default=0.02, help="filter radius in metres")
 parser.add_argument("--volume", type=float, default=0.5)
+parser.add_argument("--move", type=float, default=None, help="MMA move limit (default: MMA's own)")
 parser.add_argument("--out", default="benchmarks/results/connecting_rod_mma.npz")
 args = parser.parse_args()
 
@@ -50,7 +51,7 @@ def report(k, x, info):
     print(f"step {k}: {time.perf_counter() - start:.0f} s", flush=True)
 
 
-result = fj.optimize(fun, case.initial_design(args.volume), fj.MMA(x_min=body.material.x_min), volume,
+result = fj.optimize(fun, case.initial_design(args.volume), fj.MMA(x_min=body.material.x_min, **({} if args.move is None else {'move': args.move})), volume,
                      iterations=args.steps, beta=schedule, progress=False, callback=report)
 h = result.history
 print(f"psi / psi(uniform start): {h.value[-1] / h.value[0]:.3f} (psi_0 = {h.value[0]:.4e}, last {h.value[-1]:.4e})")
