@@ -150,9 +150,9 @@ Per evaluation of the equations of motion [us] ({N_STATES} states of the motion,
 
 Where the spatial cost goes: the dependent coordinates (14: the rod's and the driven crank's `R, p`, against the
 planar rod's 3), not the bodies' equations (mass matrix and forces, closed-form `G`-matrix expressions, a few us):
-Newton's method (a Jacobian of all 17 constraint rows per iteration, two unrolled iterations and a while loop) is
-about half, the velocity level and the minimal terms the rest. Next step (not done): solve `C_d` by its block
-lower-triangular structure (crank `p` 4 x 4, crank `R` 3 x 3 on time alone, rod 7 x 7), Newton per block.
+Newton's method and the solves with `C_d` run by the blocks of its block lower-triangular structure (crank `p`
+4 x 4, crank `R` 3 x 3 on time alone, rod 7 x 7; found when the `Problem` is built, `_dynamics/_block_triangular.py`),
+one unrolled Newton iteration per block and a loop; the velocity level and the minimal terms carry the rest.
 Test: `tests/test_spatial_flexible_slider_crank.py` (`-m slow`).
 """
     print(body)
