@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 
 from .._dynamics._model import MinimalModel, _zeros_for_none
-from .._dynamics._small_linalg import LU, lu_factor, lu_solve, matmul, spd_solve
+from .._dynamics._small_linalg import LU, BlockLU, lu_factor, lu_solve, matmul, spd_solve
 from .._scene._scene import Scene
 
 
@@ -47,7 +47,7 @@ class _Augmented(eqx.Module):
 
     m: jax.Array
     c_i: jax.Array
-    lu_d: LU
+    lu_d: LU | BlockLU
     lu_bar: LU
     d: jax.Array
 
