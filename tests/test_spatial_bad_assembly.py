@@ -27,6 +27,7 @@ def _bar_and_wall(wall: float):
     return fj.Problem(scene, 0.1, positions=positions, objective=fj.KineticEnergy())
 
 
+@pytest.mark.slow  # ~5 s CPU (the Problem's compilations and the least-squares diagnosis' residual)
 def test_assembly_that_cannot_close_names_the_violated_constraints():
     # The tip misses the wall by WALL - LENGTH = 0.8 at best (bar along x). Least squares over the bar's R and p shares
     # that gap between the loop's two equations of unit weight that carry it, the hinge's x row and the plane's row:
