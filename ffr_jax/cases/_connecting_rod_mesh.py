@@ -119,7 +119,8 @@ def connecting_rod_groups(*, length: float = 0.3, bore_a: float = 0.025, bore_b:
     for tag, name in enumerate(_SURFACES, start=1):
         q = quads[name]
         a, b, c = nodes2[q[:, 0]], nodes2[q[:, 1]], nodes2[q[:, 2]]
-        clockwise = np.cross(b - a, c - b) < 0  # a quad numbered clockwise seen from +z would make inverted hexahedra
+        u, v = b - a, c - b
+        clockwise = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] < 0  # clockwise from +z: inverted hexahedra
         q = np.where(clockwise[:, None], q[:, ::-1], q)
         bottom = (q[None] + layers).reshape(-1, 4)
         hexes.append(np.concatenate([bottom, bottom + n2], axis=1))
