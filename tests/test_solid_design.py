@@ -147,3 +147,13 @@ def test_body_data_design_derivative_matches_central_differences(rod):
         fd = float(_invariants(body, x + h * d) - _invariants(body, x - h * d)) / (2 * h)
         got = float(grad @ d)
         assert abs(got - fd) <= 1e-5 * max(abs(fd), abs(float(value))), f"{name}: gradient {got}, central {fd}"
+
+
+@pytest.mark.slow
+def test_case_design_and_mesh_of_a_solid_case():
+    """`case.design` / `case.mesh` (the one designed body and its mesh) work for a solid case under the suite's
+    runtime type checks too (they were annotated for planar bodies only, and a solid case raised there)."""
+    pytest.importorskip("gmsh")
+    case = fj.cases.connecting_rod_slider_crank(0.02, 1, 2)
+    assert isinstance(case.design, fj.SolidDesignedBody) and case.design is case.design_map.only
+    assert isinstance(case.mesh, fj.SolidMesh)

@@ -13,6 +13,8 @@ from .._design.design_map import AbstractDesignMap
 from .._design.designed_body import DesignedBody
 from .._design.material import SIMP
 from .._design.mesh import QuadMesh
+from .._design.solid_designed_body import SolidDesignedBody
+from .._design.solid_mesh import SolidMesh
 from ._problem import Problem
 from .._scene._scene import Scene
 
@@ -81,12 +83,12 @@ class Case(eqx.Module):
 
     # --- the one designed body (the rod cases) -------------------------------------------------
     @property
-    def design(self) -> DesignedBody:
+    def design(self) -> DesignedBody | SolidDesignedBody:
         """The designed body, when the case has exactly one (e.g. for `ffr_jax.DensityFilter(case.design, r)`)."""
         return self.design_map.only
 
     @property
-    def mesh(self) -> QuadMesh:
+    def mesh(self) -> QuadMesh | SolidMesh:
         return self.design.mesh
 
     @property
