@@ -13,6 +13,66 @@ DESIGN, SOLID, VOID = 0, 1, 2
 _ROLE_NAMES = {DESIGN: "design", SOLID: "passive solid", VOID: "passive void"}
 
 
+def checked_roles(n_elements: int, roles, empty: str) -> tuple[np.ndarray, np.ndarray]:
+    """`(roles, design elements)` of a role array `(n_elements,)` (`None`: all design), or a `ValueError`; `empty`
+    is the message for a domain without a design element. Shared by [`DesignDomain`][] and the solid domain."""
+    roles = np.zeros(n_elements, dtype=np.int8) if roles is None else np.asarray(roles)
+    if roles.shape != (n_elements,):
+        raise ValueError(f"roles must have shape ({n_elements},) (one per element), got {roles.shape}.")
+    bad = np.flatnonzero(~np.isin(roles, list(_ROLE_NAMES)))
+    if bad.size:
+        raise ValueError(f"roles must be DESIGN (0), SOLID (1) or VOID (2); elements {_format_ids(bad)} are not.")
+    design = np.flatnonzero(roles == DESIGN)
+    if design.size == 0:
+        raise ValueError(empty)
+    return roles, design
+
+
+def roles_from_masks(n_elements: int, solid=None, void=None) -> np.ndarray:
+    """Roles from boolean element masks `(n_elements,)`: `solid` and `void` (disjoint), the rest design."""
+    roles = np.zeros(n_elements, dtype=np.int8)
+    for name, mask, role in (("solid", solid, SOLID), ("void", void, VOID)):
+        if mask is None:
+            continue
+        mask = np.asarray(mask)
+        if mask.shape != (n_elements,) or mask.dtype != bool:
+            raise ValueError(f"The {name} mask must be a boolean array of shape ({n_elements},), "
+                             f"got {mask.dtype} {mask.shape}.")
+        clash = np.flatnonzero(mask & (roles != DESIGN))
+        if clash.size:
+            raise ValueError(f"Elements {_format_ids(clash)} are marked both solid and void.")
+        roles[mask] = role
+    return roles
+
+
+def checked_design(domain, x, x_min: float, body: str | None = None) -> Float[Array, " n_design"]:
+    """[`DesignDomain.check`][] for any domain with `n_design` and `mesh.n_elements` (the planar and solid ones)."""
+    of_body = "" if body is None else f" for body {body!r}"
+    x = design_array(x, of_body)
+    if x.shape != (domain.n_design,):
+        raise DesignError(
+            f"Design vector has shape {x.shape}, expected ({domain.n_design},){of_body}: one density per design "
+            f"element ({domain.mesh.n_elements} elements, {domain.mesh.n_elements - domain.n_design} passive). "
+            "Use initial_design(value) for a valid vector."
+        )
+    if not is_traced(x):
+        design_values(x, x_min, of_body)
+        return x
+    x = error_if(x, ~jnp.all(jnp.isfinite(x)), f"Design vector contains NaN or inf{of_body}; every density must "
+                 f"be a finite number in [x_min, 1] = [{x_min}, 1].", DesignError)
+    return error_if(
+        x, jnp.any((x < x_min - DESIGN_SLACK) | (x > 1.0 + DESIGN_SLACK)),
+        f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; clip or project the design first.",
+        DesignError,
+    )
+
+
+def element_densities(domain, x, x_min: float) -> Float[Array, " n_elements"]:
+    """All element densities `(n_elements,)` of a domain: `x` on design elements, 1 on solid, `x_min` on void."""
+    passive = jnp.where(domain.roles == SOLID, 1.0, jnp.where(domain.roles == VOID, x_min, 0.0)).astype(x.dtype)
+    return passive.at[domain.design_elements].set(x)
+
+
 class DesignDomain(eqx.Module):
     """Which elements of a mesh carry a design variable, and which are passive solid or void.
 
@@ -36,15 +96,7 @@ class DesignDomain(eqx.Module):
     def __init__(self, mesh: QuadMesh, roles=None):
         if not isinstance(mesh, QuadMesh):
             raise TypeError(f"mesh must be a QuadMesh, got {type(mesh).__name__}.")
-        roles = np.zeros(mesh.n_elements, dtype=np.int8) if roles is None else np.asarray(roles)
-        if roles.shape != (mesh.n_elements,):
-            raise ValueError(f"roles must have shape ({mesh.n_elements},) (one per element), got {roles.shape}.")
-        bad = np.flatnonzero(~np.isin(roles, list(_ROLE_NAMES)))
-        if bad.size:
-            raise ValueError(f"roles must be DESIGN (0), SOLID (1) or VOID (2); elements {_format_ids(bad)} are not.")
-        design = np.flatnonzero(roles == DESIGN)
-        if design.size == 0:
-            raise ValueError("The domain has no design element (every element is passive).")
+        roles, design = checked_roles(mesh.n_elements, roles, "The domain has no design element (every element is passive).")
         self.mesh = mesh
         self.roles = jnp.asarray(roles, dtype=jnp.int8)
         self.design_elements = jnp.asarray(design, dtype=jnp.int32)
@@ -53,19 +105,7 @@ class DesignDomain(eqx.Module):
     @classmethod
     def from_masks(cls, mesh: QuadMesh, solid=None, void=None) -> "DesignDomain":
         """Roles from boolean element masks `(n_elements,)`: `solid` and `void` (disjoint), the rest design."""
-        roles = np.zeros(mesh.n_elements, dtype=np.int8)
-        for name, mask, role in (("solid", solid, SOLID), ("void", void, VOID)):
-            if mask is None:
-                continue
-            mask = np.asarray(mask)
-            if mask.shape != (mesh.n_elements,) or mask.dtype != bool:
-                raise ValueError(f"The {name} mask must be a boolean array of shape ({mesh.n_elements},), "
-                                 f"got {mask.dtype} {mask.shape}.")
-            clash = np.flatnonzero(mask & (roles != DESIGN))
-            if clash.size:
-                raise ValueError(f"Elements {_format_ids(clash)} are marked both solid and void.")
-            roles[mask] = role
-        return cls(mesh, roles)
+        return cls(mesh, roles_from_masks(mesh.n_elements, solid, void))
 
     def role_array(self) -> np.ndarray:
         """The roles as a NumPy array (host side: filters, plots)."""
@@ -111,26 +151,8 @@ class DesignDomain(eqx.Module):
 
         `body` (optional) names the body in the messages.
         """
-        of_body = "" if body is None else f" for body {body!r}"
-        x = design_array(x, of_body)
-        if x.shape != (self.n_design,):
-            raise DesignError(
-                f"Design vector has shape {x.shape}, expected ({self.n_design},){of_body}: one density per design "
-                f"element ({self.mesh.n_elements} elements, {self.mesh.n_elements - self.n_design} passive). "
-                "Use initial_design(value) for a valid vector."
-            )
-        if not is_traced(x):
-            design_values(x, x_min, of_body)
-            return x
-        x = error_if(x, ~jnp.all(jnp.isfinite(x)), f"Design vector contains NaN or inf{of_body}; every density must "
-                     f"be a finite number in [x_min, 1] = [{x_min}, 1].", DesignError)
-        return error_if(
-            x, jnp.any((x < x_min - DESIGN_SLACK) | (x > 1.0 + DESIGN_SLACK)),
-            f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; clip or project the design first.",
-            DesignError,
-        )
+        return checked_design(self, x, x_min, body)
 
     def element_densities(self, x, x_min: float) -> Float[Array, " n_elements"]:
         """All element densities `(n_elements,)`: `x` on design elements, 1 on solid, `x_min` on void."""
-        passive = jnp.where(self.roles == SOLID, 1.0, jnp.where(self.roles == VOID, x_min, 0.0)).astype(x.dtype)
-        return passive.at[self.design_elements].set(x)
+        return element_densities(self, x, x_min)

@@ -5,10 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .._checks import DESIGN_SLACK, design_array, design_values, is_traced
-from .._errors import DesignError, error_if
-from .domain import DESIGN, SOLID, VOID
-from .element.solid_base import _format_ids
+from .domain import checked_design, checked_roles, element_densities, roles_from_masks
 from .solid_groups import PhysicalGroups
 from .solid_mesh import SolidMesh
 
@@ -33,15 +30,8 @@ class SolidDesignDomain(eqx.Module):
     def __init__(self, mesh: SolidMesh, roles=None):
         if not isinstance(mesh, SolidMesh):
             raise TypeError(f"mesh must be a SolidMesh (box_grid, read_solid_mesh), got {type(mesh).__name__}.")
-        roles = np.zeros(mesh.n_elements, dtype=np.int8) if roles is None else np.asarray(roles)
-        if roles.shape != (mesh.n_elements,):
-            raise ValueError(f"roles must have shape ({mesh.n_elements},) (one per element), got {roles.shape}.")
-        bad = np.flatnonzero(~np.isin(roles, (DESIGN, SOLID, VOID)))
-        if bad.size:
-            raise ValueError(f"roles must be DESIGN (0), SOLID (1) or VOID (2); elements {_format_ids(bad)} are not.")
-        design = np.flatnonzero(roles == DESIGN)
-        if design.size == 0:
-            raise ValueError("The solid design domain has no design element (every element is passive).")
+        roles, design = checked_roles(mesh.n_elements, roles,
+                                      "The solid design domain has no design element (every element is passive).")
         self.mesh = mesh
         self.roles = jnp.asarray(roles, dtype=jnp.int8)
         self.design_elements = jnp.asarray(design, dtype=jnp.int32)
@@ -50,19 +40,7 @@ class SolidDesignDomain(eqx.Module):
     @classmethod
     def from_masks(cls, mesh: SolidMesh, solid=None, void=None) -> "SolidDesignDomain":
         """Roles from boolean element masks `(n_elements,)`: `solid` and `void` (disjoint), the rest design."""
-        roles = np.zeros(mesh.n_elements, dtype=np.int8)
-        for name, mask, role in (("solid", solid, SOLID), ("void", void, VOID)):
-            if mask is None:
-                continue
-            mask = np.asarray(mask)
-            if mask.shape != (mesh.n_elements,) or mask.dtype != bool:
-                raise ValueError(f"The {name} mask must be a boolean array of shape ({mesh.n_elements},), "
-                                 f"got {mask.dtype} {mask.shape}.")
-            clash = np.flatnonzero(mask & (roles != DESIGN))
-            if clash.size:
-                raise ValueError(f"Elements {_format_ids(clash)} are marked both solid and void.")
-            roles[mask] = role
-        return cls(mesh, roles)
+        return cls(mesh, roles_from_masks(mesh.n_elements, solid, void))
 
     @classmethod
     def from_groups(cls, groups: PhysicalGroups, solid: tuple[str, ...] = (),
@@ -97,24 +75,8 @@ class SolidDesignDomain(eqx.Module):
     def check(self, x, x_min: float, body: str | None = None) -> Float[Array, " n_design"]:
         """Validate a design as [`DesignDomain.check`][]: dtype and shape at trace time, NaN, inf and the bounds
         `[x_min, 1]` at once when concrete, else at run time; a [`DesignError`][] otherwise."""
-        of_body = "" if body is None else f" for body {body!r}"
-        x = design_array(x, of_body)
-        if x.shape != (self.n_design,):
-            raise DesignError(
-                f"Design vector has shape {x.shape}, expected ({self.n_design},){of_body}: one density per design "
-                f"element ({self.mesh.n_elements} elements, {self.mesh.n_elements - self.n_design} passive). "
-                "Use initial_design(value) for a valid vector.")
-        if not is_traced(x):
-            design_values(x, x_min, of_body)
-            return x
-        x = error_if(x, ~jnp.all(jnp.isfinite(x)), f"Design vector contains NaN or inf{of_body}; every density must "
-                     f"be a finite number in [x_min, 1] = [{x_min}, 1].", DesignError)
-        return error_if(
-            x, jnp.any((x < x_min - DESIGN_SLACK) | (x > 1.0 + DESIGN_SLACK)),
-            f"Design densities must lie in [x_min, 1] = [{x_min}, 1]{of_body}; clip or project the design first.",
-            DesignError)
+        return checked_design(self, x, x_min, body)
 
     def element_densities(self, x, x_min: float) -> Float[Array, " n_elements"]:
         """All element densities `(n_elements,)`: `x` on design elements, 1 on solid, `x_min` on void."""
-        passive = jnp.where(self.roles == SOLID, 1.0, jnp.where(self.roles == VOID, x_min, 0.0)).astype(x.dtype)
-        return passive.at[self.design_elements].set(x)
+        return element_densities(self, x, x_min)
