@@ -65,7 +65,7 @@ class SolidDesignDomain(eqx.Module):
 
     def design_areas(self) -> np.ndarray:
         """Volumes `(n_design,)` of the design elements (the volume weights; named as the planar domain's areas so
-        that [`DensityFilter`][] and [`VolumeConstraint`][] take either), in design order."""
+        that `fj.DensityFilter` and `fj.VolumeConstraint` take either), in design order."""
         return self.mesh.element_volumes()[np.asarray(self.design_elements)]
 
     def initial_design(self, value: float = 0.5) -> Float[Array, " n_design"]:
