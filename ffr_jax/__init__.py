@@ -40,6 +40,7 @@ from ._app._vtu_series import write_vtu_series as write_vtu_series
 from ._objective._base import AbstractIntegrand as AbstractIntegrand
 from ._objective._base import Scaled as Scaled, Sum as Sum
 from ._objective._compliance import Compliance as Compliance
+from ._objective._time_window import TimeWindow as TimeWindow
 from ._objective._function import FunctionIntegrand as FunctionIntegrand
 from ._objective._kinetic_energy import KineticEnergy as KineticEnergy
 from ._objective._joint_load import JointLoad as JointLoad
