@@ -1,0 +1,241 @@
+"""Time to a design for the link example and the two links (issue 30): MMA, a filter in metres, continuation.
+
+Two examples, one command each:
+
+- `link`: the holed link as the coupler of a crank–rocker (`fj.cases.link_four_bar`, gmsh mesh of target size
+  `--mesh-size`, passive solid rims around both pin holes), objective the coupler's integral compliance.
+- `two-links`: coupler and rocker of a crank–rocker designed together (`fj.cases.four_bar_two_links`, coupler
+  `--nx` x `--ny` elements, the rocker the same element size), objective the sum of both compliances; one
+  dict design, one volume bound shared by both rods.
+
+Both run what a user gets: `fj.optimize` with `fj.MMA()`'s defaults (move 0.2), a `fj.DensityFilter` whose
+radius is a physical length (`--filter-length` metres, `scale=(1, 1)`: the same length on a refined mesh),
+`fj.HeavisideProjection(0.5)` and the default continuation (no `beta` given: `fj.beta_continuation()`,
+1 -> 32 doubled every 10 steps), volume <= `--volume`. Checkpoints every `--checkpoint-every` steps into
+`--out`; running the same command again resumes (the steps are deterministic), and every gradient call's time
+is appended to `OUT/calls.jsonl` as it happens, so a killed run loses neither design nor timing.
+
+At the end: psi of the final physical design and of the uniform design of the same volume (forward rtol 1e-10),
+their ratio, the volume (area fraction), the grey share (`fj.grey_share`, 0.1 < x_phys < 0.9, by area), the
+wall time split into gradient calls (the first with compile), the FE stage (modes and body data, timed alone
+and multiplied by the number of calls) and the rest (MMA, constraints, projection, driver). With
+`--refine-of DIR` (a run of the same example on a coarser mesh with the same `--filter-length`) also the share
+of the area where the two designs thresholded at 0.5 differ (each fine element compared with the coarse element
+that contains its centroid). Writes `OUT/summary.json`, `OUT/design.png`, `OUT/convergence.png`, `OUT/design.npz`.
+
+Usage (from the worktree root):
+```
+PYTHONPATH=$PWD nohup python benchmarks/bench_time_to_design_links.py link --mesh-size 0.004 --modes 2 --t1 0.05 \
+    --filter-length 0.006 --iters 60 > link.log 2>&1 &
+PYTHONPATH=$PWD nohup python benchmarks/bench_time_to_design_links.py two-links --nx 100 --ny 8 --modes 3 --t1 1.0 \
+    --filter-length 0.015 --iters 60 > two_links.log 2>&1 &
+```
+RESULTS.md: "Time to a design", subsections of the link and the two links (written by hand from summary.json).
+"""
+
+import argparse
+import json
+import os
+import pathlib
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import ffr_jax as fj
+
+RESULTS_DIR = pathlib.Path(__file__).parent / "results"
+
+
+def build(args):
+    """`(case, filter, projection, objective, constraint, x0, areas)` of the example (areas: dict or array)."""
+    if args.example == "link":
+        case = fj.cases.link_four_bar(args.t1, mesh_size=args.mesh_size, n_modes=args.modes)
+        x_min = case.material.x_min
+        filt = fj.DensityFilter(case.design, args.filter_length, scale=(1.0, 1.0))
+        areas = np.asarray(case.design.domain.design_areas())
+    else:
+        case = fj.cases.four_bar_two_links(args.nx, args.ny, args.modes, args.t1)
+        x_min = min(body.material.x_min for body in case.design_map.bodies.values())
+        filt = {name: fj.DensityFilter(body, args.filter_length, scale=(1.0, 1.0))
+                for name, body in case.design_map.bodies.items()}
+        areas = {name: np.asarray(body.domain.design_areas()) for name, body in case.design_map.bodies.items()}
+    projection = fj.HeavisideProjection(0.5, x_min=x_min)
+    fun = fj.make_objective(case, filter=filt, projection=projection, rtol=args.rtol, atol=args.atol)
+    constraint = fj.VolumeConstraint(args.volume, x_min=x_min, filter=filt, projection=projection)
+    x0 = case.initial_design(args.volume if args.example == "link"
+                             else {name: args.volume for name in case.design_map.names})
+    return case, filt, projection, fun, constraint, x_min, x0, areas
+
+
+def area_fraction(x_phys, areas) -> float:
+    if isinstance(x_phys, dict):
+        return float(sum(areas[n] @ np.asarray(x_phys[n]) for n in x_phys) / sum(areas[n].sum() for n in x_phys))
+    return float(areas @ np.asarray(x_phys) / areas.sum())
+
+
+def fe_stage_seconds(case, x_phys) -> float:
+    """Median time of the FE stage alone (modes and body data of every designed body), compiled."""
+    if isinstance(x_phys, dict):
+        fe = jax.jit(lambda x: [case.design_map.bodies[n].modes(x[n]) for n in x])
+    else:
+        fe = jax.jit(lambda x: case.modes(x))
+    jax.block_until_ready(fe(x_phys))
+    times = []
+    for _ in range(3):
+        start = time.perf_counter()
+        jax.block_until_ready(fe(x_phys))
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+def centroids(case):
+    """`{name: (n_design, 2)}` (or one array) of the design elements' centroids in the body frame."""
+    if len(case.design_map.names) > 1:
+        return {name: np.asarray(body.domain.design_centroids()) for name, body in case.design_map.bodies.items()}
+    return np.asarray(case.design.domain.design_centroids())
+
+
+def refinement_difference(fine_case, fine_phys, fine_areas, coarse_dir: pathlib.Path, coarse_args) -> float:
+    """Area share where the fine and the coarse design, thresholded at 0.5, differ (nearest coarse centroid)."""
+    from scipy.spatial import cKDTree
+
+    coarse_case = build(coarse_args)[0]
+    stored = np.load(coarse_dir / "design.npz")
+    fine_c, coarse_c = centroids(fine_case), centroids(coarse_case)
+    if isinstance(fine_phys, dict):
+        differ = sum(fine_areas[n] @ ((np.asarray(fine_phys[n]) > 0.5)
+                                     != (stored[f"x_phys_{n}"][cKDTree(coarse_c[n]).query(fine_c[n])[1]] > 0.5))
+                     for n in fine_phys)
+        return float(differ / sum(a.sum() for a in fine_areas.values()))
+    nearest = cKDTree(coarse_c).query(fine_c)[1]
+    return float(fine_areas @ ((np.asarray(fine_phys) > 0.5) != (stored["x_phys"][nearest] > 0.5)) / fine_areas.sum())
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("example", choices=["link", "two-links"])
+    parser.add_argument("--mesh-size", type=float, default=0.004, help="link: gmsh target element size [m]")
+    parser.add_argument("--nx", type=int, default=100, help="two-links: coupler elements along")
+    parser.add_argument("--ny", type=int, default=8, help="two-links: elements across")
+    parser.add_argument("--modes", type=int, default=2)
+    parser.add_argument("--t1", type=float, default=0.05)
+    parser.add_argument("--iters", type=int, default=60)
+    parser.add_argument("--volume", type=float, default=0.5)
+    parser.add_argument("--filter-length", type=float, required=True, help="filter radius in metres")
+    parser.add_argument("--rtol", type=float, default=1e-8, help="tolerance of the solves inside the loop")
+    parser.add_argument("--atol", type=float, default=None,
+                        help="absolute tolerance inside the loop (default: link 1e-15, two-links 1e-12)")
+    parser.add_argument("--checkpoint-every", type=int, default=5)
+    parser.add_argument("--refine-of", type=pathlib.Path, default=None,
+                        help="a coarser run's OUT folder: compare the thresholded layouts")
+    parser.add_argument("--out", type=pathlib.Path, default=None)
+    parser.add_argument("--force-resume", action="store_true", help="passed to fj.optimize (a checkpoint of an "
+                        "older version of this script, whose stored settings differ)")
+    args = parser.parse_args()
+    if args.atol is None:
+        args.atol = 1e-15 if args.example == "link" else 1e-12  # link: psi ~ 1e-8, its coordinates ~ 1e-7
+    if args.out is None:
+        args.out = RESULTS_DIR / f"time_to_design_{args.example.replace('-', '_')}"
+    args.out.mkdir(parents=True, exist_ok=True)
+    # --iters is left out of the stored settings, so the same command with more steps continues a finished run.
+    config = {k: v for k, v in vars(args).items() if k not in ("out", "refine_of", "checkpoint_every", "iters",
+                                                             "force_resume")}
+
+    start_all = time.perf_counter()
+    case, filt, projection, fun, constraint, x_min, x0, areas = build(args)
+    setup_s = time.perf_counter() - start_all
+    session = time.time()
+    calls_file = args.out / "calls.jsonl"
+
+    def timed_fun(x, beta):
+        start = time.perf_counter()
+        value, grad = jax.block_until_ready(fun(x, beta))
+        with calls_file.open("a") as f:
+            f.write(json.dumps({"session": session, "s": time.perf_counter() - start, "beta": float(beta),
+                                "psi": float(value)}) + "\n")
+        return value, grad
+
+    for name in ("projection", "compiles_itself", "design_size", "fingerprint"):
+        if hasattr(fun, name):
+            setattr(timed_fun, name, getattr(fun, name))
+
+    resume = (args.out / "checkpoint.npz").exists()
+    load_before = os.getloadavg()
+    start = time.perf_counter()
+    result = fj.optimize(timed_fun, x0, fj.MMA(x_min), constraint, iterations=args.iters, progress=True,
+                         directory=args.out, resume=resume, checkpoint_every=args.checkpoint_every, config=config,
+                         force_resume=args.force_resume)
+    session_s = time.perf_counter() - start
+    with (args.out / "sessions.jsonl").open("a") as f:
+        f.write(json.dumps({"session": session, "run_s": session_s, "setup_s": setup_s, "resumed": resume,
+                            "load_before": load_before, "load_after": os.getloadavg()}) + "\n")
+    h = result.history
+    beta_last = fj.beta_continuation()(h.steps - 1)
+    x_phys = fj.physical_densities(result.x, filt, projection, beta_last)
+    x_phys = {n: np.asarray(v) for n, v in x_phys.items()} if isinstance(x_phys, dict) else np.asarray(x_phys)
+
+    fe_s = fe_stage_seconds(case, x_phys)
+    volume = area_fraction(x_phys, areas)
+    uniform = case.initial_design(volume if args.example == "link" else {n: volume for n in case.design_map.names})
+    psi_opt = float(fj.objective(case, x_phys, rtol=1e-10, atol=args.atol))
+    psi_uniform = float(fj.objective(case, uniform, rtol=1e-10, atol=args.atol))
+    grey = float(fj.grey_share(x_phys, areas=areas))
+
+    calls = [json.loads(line) for line in calls_file.read_text().splitlines()]
+    sessions = [json.loads(line) for line in (args.out / "sessions.jsonl").read_text().splitlines()]
+    first_per_session = {}
+    for c in calls:
+        first_per_session.setdefault(c["session"], c["s"])
+    first_s = sum(first_per_session.values())
+    later = [c["s"] for c in calls if first_per_session[c["session"]] is not c["s"]]
+    wall = sum(s["run_s"] for s in sessions)
+    summary = {
+        "example": args.example, "settings": config,
+        "mesh": (f"gmsh {args.mesh_size} m" if args.example == "link"
+                 else ", ".join(f"{n} {b.mesh.nx} x {b.mesh.ny}" for n, b in case.design_map.bodies.items())),
+        "n_elements": (int(case.mesh.n_elements) if args.example == "link"
+                       else {n: int(b.mesh.n_elements) for n, b in case.design_map.bodies.items()}),
+        "n_design": (int(case.n_design) if args.example == "link" else dict(case.design_map.design_sizes)),
+        "iterations": int(h.steps), "beta_last": beta_last, "gradient_calls": len(calls),
+        "sessions": len(sessions), "wall_time_s": wall, "setup_s_last_session": setup_s,
+        "first_gradient_per_session_s": first_s, "later_gradients_s": float(np.sum(later)),
+        "median_later_gradient_s": float(np.median(later)) if later else None,
+        "fe_stage_per_call_s": fe_s, "fe_stage_total_s": fe_s * len(calls),
+        "optimizer_and_driver_s": wall - float(sum(c["s"] for c in calls)),
+        "psi_optimised": psi_opt, "psi_uniform": psi_uniform, "ratio": psi_opt / psi_uniform,
+        "volume": volume, "grey_share": grey,
+        "grey_share_per_body": ({n: float(fj.grey_share(v, areas=areas[n])) for n, v in x_phys.items()}
+                                if isinstance(x_phys, dict) else None),
+        "volume_per_body": ({n: area_fraction({n: v}, areas) for n, v in x_phys.items()}
+                            if isinstance(x_phys, dict) else None),
+        "back_offs": result.back_offs, "feasible": bool(result.feasible),
+        "load": [s["load_before"] for s in sessions], "machine_cpus": os.cpu_count(),
+        "grey_history": [float(g) for g in h.grey], "psi_history": [float(v) for v in h.value],
+    }
+    if args.refine_of is not None:
+        coarse = json.loads((args.refine_of / "summary.json").read_text())["settings"]
+        coarse_args = argparse.Namespace(**{**vars(args), **coarse})
+        summary["refinement_of"] = str(args.refine_of)
+        summary["thresholded_layouts_differ_area_share"] = refinement_difference(case, x_phys, areas, args.refine_of,
+                                                                                  coarse_args)
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
+    if isinstance(x_phys, dict):
+        np.savez(args.out / "design.npz", **{f"x_{n}": np.asarray(result.x[n]) for n in x_phys},
+                 **{f"x_phys_{n}": v for n, v in x_phys.items()})
+        fig = fj.plot_designs(case, x_phys, title=f"two links, MMA + continuation, {h.steps} steps, V = {volume:.3f}, "
+                                                  f"psi ratio {psi_opt / psi_uniform:.3f}, grey {100 * grey:.1f} %")
+    else:
+        np.savez(args.out / "design.npz", x=np.asarray(result.x), x_phys=x_phys)
+        ax = fj.plot_design(case, x_phys, title=f"link in a crank–rocker, MMA + continuation, {h.steps} steps, "
+                                                f"V = {volume:.3f}, psi ratio {psi_opt / psi_uniform:.3f}, "
+                                                f"grey {100 * grey:.1f} %")
+        fig = ax.figure
+    fig.savefig(args.out / "design.png", dpi=120)
+    fj.plot_history(h).figure.savefig(args.out / "convergence.png", dpi=100)
+    print(json.dumps({k: v for k, v in summary.items() if not k.endswith("history")}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
