@@ -37,6 +37,7 @@ from ._app._animation import animate as animate
 from ._app._outline import density_outline as density_outline, write_dxf as write_dxf, write_svg as write_svg
 from ._app._vtu import write_vtu as write_vtu
 from ._app._vtu_series import write_vtu_series as write_vtu_series
+from ._app._solid_render import plot_solid_design as plot_solid_design
 from ._objective._base import AbstractIntegrand as AbstractIntegrand
 from ._objective._base import Scaled as Scaled, Sum as Sum
 from ._objective._compliance import Compliance as Compliance

@@ -47,8 +47,10 @@ def _info(args) -> int:
     elapsed = time.perf_counter() - t
     print(f"{describe(args.case, case)}, x = {args.value}")
     print("natural frequencies [Hz]: " + ", ".join(f"{f:.4g}" for f in freq))
+    inertia = np.asarray(data.inertia)  # planar: J about the frame origin; spatial: the 3 x 3 tensor
+    inertia = f"{float(inertia):.6g}" if inertia.ndim == 0 else f"diag {np.array2string(np.diag(inertia), precision=6)}"
     print(f"mass {float(data.mass):.6g} kg, centre of mass x {float(data.first_moment[0] / data.mass):.6g} m, "
-          f"inertia about the frame origin {float(data.inertia):.6g} kg m^2")
+          f"inertia about the frame origin {inertia} kg m^2")
     print(f"modal mass diag {np.round(np.diag(np.asarray(data.modal_mass)), 12)}")
     print(f"(FE + modes + body data, compile included: {elapsed:.2f} s)")
     return 0
@@ -68,6 +70,9 @@ def _gradient(args) -> int:
     if args.atol is None:
         args.atol = scene_settings(args.case, {})["atol"]
     _cli_checks.gradient_options(args)
+    if args.plot is not None and args.case == "connecting-rod":
+        raise ValueError("--plot draws the gradient over a planar body; for the connecting rod write it with --json "
+                         "(design_elements and grad) and draw it with ffr_jax.plot_solid_design or in ParaView.")
     case = _make_case(args)
     x = case.initial_design(args.value)
     method = args.method
@@ -112,7 +117,9 @@ def _gradient(args) -> int:
         where = f"element row {row}, column {col + 1}"
     else:
         element = int(case.design.domain.design_elements[largest])
-        where = f"element {element} at {np.round(case.mesh.element_centroids()[element], 4).tolist()} m"
+        centre = (case.design.domain.design_centroids()[largest] if args.case == "connecting-rod"
+                  else case.mesh.element_centroids()[element])
+        where = f"element {element} at {np.round(centre, 4).tolist()} m"
     print(f"gradient: min {grad.min():.4e}, max {grad.max():.4e}, max |g| {np.abs(grad).max():.4e} "
           f"({where}), 2-norm {np.linalg.norm(grad):.4e}")
     if rod:

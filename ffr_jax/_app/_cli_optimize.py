@@ -203,8 +203,11 @@ def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | Non
                                  float(settings["t1"]))
     else:
         case = make_case(scene, settings)
-    filt = (DensityFilter(case.design, filter_radius) if filter_length is None
-            else DensityFilter(case.design, filter_length, scale=(1.0, 1.0)))
+    if scene == "connecting-rod":  # a solid: the radius in metres (default 0.025 m, about two elements)
+        filt = DensityFilter(case.design, 0.025 if filter_length is None else filter_length, scale=(1.0, 1.0, 1.0))
+    else:
+        filt = (DensityFilter(case.design, filter_radius) if filter_length is None
+                else DensityFilter(case.design, filter_length, scale=(1.0, 1.0)))
     projection = None if eta is None else HeavisideProjection(eta, x_min=case.material.x_min)
     fun = make_objective(case, method, filter=filt, projection=projection, rtol=rtol, atol=atol)
     return case, filt, projection, fun
@@ -325,8 +328,14 @@ def _run_command(args: argparse.Namespace) -> int:
              config=np.array(json.dumps(s, sort_keys=True)), constraint_names=np.array(json.dumps(list(h.names))),
              constraint_history=h.constraint_values, constraints=np.asarray(result.constraints))
     bound = f"V = {s['volume']}" if s["optimizer"] != "mma" else f"V = {x_phys.mean():.3f} (<= {s['volume']})"
-    ax = plot_design(case, x_phys, title=f"{s['case']}, {s['optimizer']}, {bound}, {h.steps} steps")
-    ax.figure.savefig(directory / "design.png", dpi=150)
+    title = f"{s['case']}, {s['optimizer']}, {bound}, {h.steps} steps"
+    if s["case"] == "connecting-rod":  # a solid: the surface of x_phys >= 0.5 from two views
+        from ._solid_render import plot_solid_design
+
+        plot_solid_design(case.design, x_phys, directory / "design.png", title=title)
+    else:
+        ax = plot_design(case, x_phys, title=title)
+        ax.figure.savefig(directory / "design.png", dpi=150)
     ax = plot_history(h)
     ax.figure.savefig(directory / "convergence.png", dpi=150)
     if h.steps:

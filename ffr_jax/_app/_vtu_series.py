@@ -8,7 +8,9 @@ import numpy as np
 
 from .._dynamics._case import Case
 from .._outputs._peak_stress import element_von_mises
+from .._design.solid_mesh import SolidMesh
 from ._animation import body_motion, designed_body_index
+from ._solid_motion import solid_body_motion
 
 
 def write_vtu_series(path, case: Case, x_phys, *, frames: int = 60, rtol: float = 1e-8,
@@ -28,6 +30,10 @@ def write_vtu_series(path, case: Case, x_phys, *, frames: int = 60, rtol: float 
     ParaView plays the motion. The motion is `body_motion`'s: one simulation with output at
     `linspace(t0, t1, frames)`. Works on any quadrilateral mesh.
 
+    A solid body ([`SolidMesh`][]: hexahedra or 10-node tetrahedra in a spatial scene) is written as its
+    VTK cells (`hexahedron`, `tetra10`) at the placement `R + A(p) c_n` with the 3-D elastic
+    displacement `A(p) Phi q`, and cell data `density` and `design` (no stresses).
+
     **Arguments:**
     - `path`: the `.pvd` file to write.
     - `case`: a case with one designed body; `x_phys`: `(n_design,)` physical densities.
@@ -43,29 +49,38 @@ def write_vtu_series(path, case: Case, x_phys, *, frames: int = 60, rtol: float 
         raise ValueError(f"Write the VTU series as a .pvd collection (one .vtu per time beside it), got {path.name}.")
     if not (isinstance(frames, (int, np.integer)) and frames >= 2):
         raise ValueError(f"A time series needs a whole number of frames, at least 2, got frames={frames!r}.")
-    index, scene = designed_body_index(case), case.scene_template
+    index = designed_body_index(case)
     x_phys = np.asarray(case.design.check(jnp.asarray(x_phys, dtype=float)))
     ts = np.linspace(case.t0, case.t1, frames)
-    rigid, elastic, y_r = body_motion(case, x_phys, ts, rtol=rtol, atol=atol)
-    q = y_r[:, scene.offsets[index] + 3 : scene.offsets[index] + scene.sizes[index]]
-    von_mises = np.asarray(element_von_mises(case.design, jnp.asarray(x_phys), jnp.asarray(q)))
     mesh, domain = case.mesh, case.design.domain
-    quads = np.asarray(mesh.elements)
-    cell_data = {"density": [np.asarray(case.design.element_densities(x_phys))],
-                 "design": [np.isin(np.arange(mesh.n_elements), np.asarray(domain.design_elements)).astype(float)],
-                 "peak_von_mises": [von_mises.max(axis=0)]}
+    design = np.isin(np.arange(mesh.n_elements), np.asarray(domain.design_elements)).astype(float)
+    if isinstance(mesh, SolidMesh):
+        points, displacement = solid_body_motion(case, x_phys, ts, rtol=rtol, atol=atol)[:2]
+        cells = [(mesh.cell_type, np.asarray(mesh.elements))]
+        density = case.design.domain.element_densities(jnp.asarray(x_phys), case.design.material.x_min)
+        cell_data = {"density": [np.asarray(density)], "design": [design]}
+        frame_data = [{} for _ in ts]
+    else:
+        scene = case.scene_template
+        rigid, elastic, y_r = body_motion(case, x_phys, ts, rtol=rtol, atol=atol)
+        q = y_r[:, scene.offsets[index] + 3 : scene.offsets[index] + scene.sizes[index]]
+        von_mises = np.asarray(element_von_mises(case.design, jnp.asarray(x_phys), jnp.asarray(q)))
+        cells = [("quad", np.asarray(mesh.elements))]
+        cell_data = {"density": [np.asarray(case.design.element_densities(x_phys))], "design": [design],
+                     "peak_von_mises": [von_mises.max(axis=0)]}
+        frame_data = [{"von_mises": [von_mises[k]]} for k in range(len(ts))]
+        points = np.zeros((len(ts), mesh.n_nodes, 3))
+        points[:, :, :2] = rigid
+        displacement = np.zeros((len(ts), mesh.n_nodes, 3))
+        displacement[:, :, :2] = elastic
     folder = path.with_name(f"{path.stem}_vtu")
     folder.mkdir(parents=True, exist_ok=True)
     collection = ElementTree.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
     datasets = ElementTree.SubElement(collection, "Collection")
     for k, t in enumerate(ts):
-        points = np.zeros((mesh.n_nodes, 3))
-        points[:, :2] = rigid[k]
-        displacement = np.zeros((mesh.n_nodes, 3))
-        displacement[:, :2] = elastic[k]
         name = folder / f"{path.stem}_{k:04d}.vtu"
-        meshio.write(name, meshio.Mesh(points, [("quad", quads)], point_data={"elastic_displacement": displacement},
-                                       cell_data={**cell_data, "von_mises": [von_mises[k]]}))
+        meshio.write(name, meshio.Mesh(points[k], cells, point_data={"elastic_displacement": displacement[k]},
+                                       cell_data={**cell_data, **frame_data[k]}))
         ElementTree.SubElement(datasets, "DataSet", timestep=repr(float(t)), group="", part="0",
                                file=f"{folder.name}/{name.name}")
     ElementTree.indent(collection)

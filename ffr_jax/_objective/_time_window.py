@@ -24,7 +24,7 @@ class TimeWindow(AbstractIntegrand):
     t_start: float = eqx.field(static=True)
     t_end: float = eqx.field(static=True)
 
-    def __init__(self, term: AbstractIntegrand, t_start: float, t_end: float):
+    def __init__(self, term, t_start: float, t_end: float):
         if not isinstance(term, AbstractIntegrand):
             raise ValueError(f"TimeWindow averages an objective term (e.g. ffr_jax.Compliance(body=0)), got "
                              f"{type(term).__name__}.")

@@ -86,6 +86,11 @@ def connecting_rod_slider_crank(size: float = 0.008, n_layers: int = 2, n_modes:
     if pin_offset is None and (damping_ratio != 0.0 or average_from is not None):
         raise ValueError("damping_ratio and average_from are options of the offset-pin scene: give pin_offset (0.0 "
                          "for a pin in the crank's plane) with them.")
+    if pin_offset is not None and not number(pin_offset, "connecting_rod_slider_crank(pin_offset=...)") ** 2 \
+            + eccentricity**2 < length**2:
+        raise ValueError(f"The crank pin offset e and the crank radius r must satisfy e^2 + r^2 < length^2 for the rod "
+                         f"to reach the slider line at every crank angle, got e = {pin_offset}, r = {eccentricity}, "
+                         f"length = {length}.")
     if not 0.0 <= number(damping_ratio, "connecting_rod_slider_crank(damping_ratio=...)") < 1.0:
         raise ValueError(f"damping_ratio must lie in [0, 1) (a modal damping ratio), got {damping_ratio}.")
     rod = connecting_rod(size, n_layers, n_modes, length=length, poisson=poisson, material=material)
