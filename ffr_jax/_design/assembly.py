@@ -30,6 +30,7 @@ from jaxtyping import Array, Float, Int
 
 from .element.base import AbstractElement
 from .mesh import QuadMesh
+from .solid_assembly import SolidFEModel
 
 KINDS = ("stiffness", "mass")
 
@@ -145,11 +146,12 @@ class ElementOperator(eqx.Module):
         return dense_matrix(self.model, self.values, self.kind)
 
 
-def dense_matrix(model: FEModel, values, kind: str) -> Float[Array, "n_dof n_dof"]:
-    """Dense assembly `sum_e v_e P_e^T A_e P_e`, `(n_dof, n_dof)` (small meshes only)."""
+def dense_matrix(model: FEModel | SolidFEModel, values, kind: str) -> Float[Array, "n_dof n_dof"]:
+    """Dense assembly `sum_e v_e P_e^T A_e P_e`, `(n_dof, n_dof)` (small meshes only; planar or solid models)."""
     dofs = model.element_dofs
-    rows = jnp.repeat(dofs, 8, axis=1).ravel()
-    cols = jnp.tile(dofs, (1, 8)).ravel()
+    d = dofs.shape[1]
+    rows = jnp.repeat(dofs, d, axis=1).ravel()
+    cols = jnp.tile(dofs, (1, d)).ravel()
     vals = (values[:, None, None] * model.unit_matrices(kind)).ravel()
     return jnp.zeros((model.n_dof, model.n_dof), dtype=vals.dtype).at[rows, cols].add(vals)
 

@@ -4,9 +4,13 @@
 
 The 3-D counterpart of [`DesignedBody`][]. Supports, interface nodes (markers) and passive regions are named by the
 mesh's physical groups ([`PhysicalGroups`][]): no node or element is searched by position. Every stage is JAX and
-differentiable in the densities; the modes come from the dense, subspace-stable [`retained_eigenpairs`][] (its
-derivative divides only by gaps between retained and discarded eigenvalues), so the part must be small enough for
-a dense eigen-solution (a few thousand degrees of freedom).
+differentiable in the densities. The modes of a supported part come from the planar chain's modal solvers on the
+interior problem (the supports held): [`DenseModes`][] (dense, subspace-stable [`retained_eigenpairs`][]),
+[`LanczosModes`][] (sparse shift-invert Lanczos on the host, the derivative by sparse complement solves: memory and
+time about linear in the mesh size, to 10^5 elements) or [`AutoModes`][] (the default: Lanczos above 1,000 degrees
+of freedom). Both derivatives divide only by gaps between retained and discarded eigenvalues, so they stay finite and
+exact for span-invariant quantities (the body data) where retained eigenvalues cross or coincide. A free part (no
+supports) takes the dense [`free_modes_dense`][] whatever the option.
 """
 
 import equinox as eqx
@@ -18,10 +22,13 @@ from .._spatial._solid_body_data import solid_body_data
 from .element.h8 import H8
 from .element.solid_base import AbstractSolidElement
 from .material import SIMP
-from .modal.dense import retained_eigenpairs
-from .solid_assembly import SolidFEModel, SolidOperator, solid_dense_matrix
+from .modal.auto import AutoModes
+from .modal.base import AbstractModalSolver
+from .modal.lanczos import LanczosModes
+from .solid_assembly import SolidFEModel, SolidOperator
 from .solid_domain import SolidDesignDomain
 from .solid_groups import PhysicalGroups
+from .solid_layout import SolidReductionLayout, solid_reduction_layout
 from .solid_modes import free_modes_dense
 
 _DIRECTIONS = {"x": 0, "y": 1, "z": 2}
@@ -33,7 +40,8 @@ class SolidDesignedBody(eqx.Module):
     **Fields:** `model` the [`SolidFEModel`][]; `domain` the [`SolidDesignDomain`][]; `material` the [`SIMP`][] law;
     `n_modes` retained eigenmodes (static); `fixed_dofs` the held degrees of freedom (static, sorted; empty: free-free
     modes, the six rigid-body modes removed); `markers` (static) the joint points, each a tuple of nodes (a point at
-    their centroid, rotating with their rigid fit; see [`solid_body_data`][]).
+    their centroid, rotating with their rigid fit; see [`solid_body_data`][]); `modal_solver` (default
+    [`AutoModes`][]) the modal solver of a supported part (module docstring).
 
     Every method is a pure function of `x` `(n_design,)`; pass the body as an argument of compiled functions.
     """
@@ -44,10 +52,18 @@ class SolidDesignedBody(eqx.Module):
     n_modes: int = eqx.field(static=True)
     fixed_dofs: tuple[int, ...] = eqx.field(static=True)
     markers: tuple[tuple[int, ...], ...] = eqx.field(static=True)
+    modal_solver: AbstractModalSolver = AutoModes()
 
     def __check_init__(self):
         if self.model.mesh != self.domain.mesh:
             raise ValueError("The solid FE model and the design domain must be built on the same mesh.")
+        if not isinstance(self.modal_solver, AbstractModalSolver):
+            raise TypeError(f"modal_solver must be DenseModes(), LanczosModes() or AutoModes(), got "
+                            f"{self.modal_solver!r}.")
+        if not self.fixed_dofs and isinstance(self.modal_solver, LanczosModes):
+            raise ValueError("LanczosModes needs supports (reference conditions that remove the six rigid motions, "
+                             "e.g. supports={'big_bore': 'xyz', 'small_bore': 'yz'}); a free part's modes are dense "
+                             "(free_modes_dense): pass supports, or modal_solver=AutoModes().")
         free = self.model.n_dof - len(self.fixed_dofs) - (0 if self.fixed_dofs else 6)
         if not isinstance(self.n_modes, int) or not 0 < self.n_modes < free:
             raise ValueError(f"n_modes={self.n_modes} must be a positive int below the {free} free degrees of freedom "
@@ -56,6 +72,12 @@ class SolidDesignedBody(eqx.Module):
     @property
     def mesh(self):
         return self.model.mesh
+
+    @property
+    def layout(self) -> SolidReductionLayout:
+        """The held (supports) and interior degrees of freedom of the modal problem (a part with supports only); a
+        `ValueError` where the supports leave a rigid motion free (checked when the modes are first computed)."""
+        return solid_reduction_layout(self.model.mesh, self.fixed_dofs)
 
     @property
     def n_design(self) -> int:
@@ -87,11 +109,7 @@ class SolidDesignedBody(eqx.Module):
         youngs, densities = self.element_values(x)
         if not self.fixed_dofs:
             return free_modes_dense(self.model, youngs, densities, self.n_modes)
-        free = np.setdiff1d(np.arange(self.model.n_dof), self.fixed_dofs)
-        k = solid_dense_matrix(self.model, youngs, "stiffness")[np.ix_(free, free)]
-        m = solid_dense_matrix(self.model, densities, "mass")[np.ix_(free, free)]
-        lam, phi = retained_eigenpairs(0.5 * (k + k.T), 0.5 * (m + m.T), self.n_modes)
-        return lam, jnp.zeros((self.model.n_dof, self.n_modes), phi.dtype).at[free].set(phi)
+        return self.modal_solver.solve(self.model, youngs, densities, self.layout, self.n_modes)
 
     def frequencies(self, x):
         """Eigenfrequencies of the retained modes in Hz, `(n_modes,)`."""
@@ -121,7 +139,7 @@ def _supports(groups: PhysicalGroups, supports) -> tuple[int, ...]:
 def solid_designed_body(groups: PhysicalGroups, n_modes: int, *, markers: tuple[str, ...], supports=None,
                         solid: tuple[str, ...] = (), void: tuple[str, ...] = (),
                         element: AbstractSolidElement = H8(), poisson: float = 0.3,
-                        material: SIMP = SIMP()) -> SolidDesignedBody:
+                        material: SIMP = SIMP(), modal_solver: AbstractModalSolver = AutoModes()) -> SolidDesignedBody:
     """A density-designed solid part from a mesh with named physical groups.
 
     **Arguments:**
@@ -133,6 +151,8 @@ def solid_designed_body(groups: PhysicalGroups, n_modes: int, *, markers: tuple[
       they must remove the six rigid-body motions). `None` (default): free-free modes.
     - `solid`, `void`: names of physical volumes that are passive solid or passive void (no design variable).
     - `element`: [`H8`][] (default), [`H11`][] or [`Tet10`][] (matching the mesh); `poisson`; `material`.
+    - `modal_solver`: [`AutoModes`][] (default: sparse [`LanczosModes`][] above 1,000 degrees of freedom),
+      [`DenseModes`][] or [`LanczosModes`][] (a part with supports; a free part's modes are always dense).
 
     **Returns:** a [`SolidDesignedBody`][].
 
@@ -148,4 +168,4 @@ def solid_designed_body(groups: PhysicalGroups, n_modes: int, *, markers: tuple[
     fixed = () if supports is None else _supports(groups, supports)
     domain = SolidDesignDomain.from_groups(groups, solid=solid, void=void)
     model = SolidFEModel(groups.mesh, element, poisson)
-    return SolidDesignedBody(model, domain, material, n_modes, fixed, marker_nodes)
+    return SolidDesignedBody(model, domain, material, n_modes, fixed, marker_nodes, modal_solver)

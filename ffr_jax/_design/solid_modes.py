@@ -20,22 +20,7 @@ import scipy.sparse.linalg as spla
 
 from .modal.dense import retained_eigenpairs
 from .solid_assembly import SolidFEModel, solid_csc_matrices, solid_dense_matrix
-
-
-def rigid_motions(nodes: np.ndarray) -> np.ndarray:
-    """The six rigid motions of the nodes `(n_nodes, 3)`, `(3 n_nodes, 6)`: translations `x, y, z`, then
-    rotations about the axes through the centroid of the nodes, scaled to unit rim displacement."""
-    nodes = np.asarray(nodes, dtype=np.float64)
-    rel = nodes - nodes.mean(axis=0)
-    rel = rel / np.sqrt(np.mean(np.sum(rel**2, axis=1)))
-    n = nodes.shape[0]
-    r = np.zeros((n, 3, 6))
-    r[:, 0, 0] = r[:, 1, 1] = r[:, 2, 2] = 1.0
-    x, y, z = rel.T
-    r[:, 1, 3], r[:, 2, 3] = -z, y  # about x
-    r[:, 0, 4], r[:, 2, 4] = z, -x  # about y
-    r[:, 0, 5], r[:, 1, 5] = -y, x  # about z
-    return r.reshape(3 * n, 6)
+from .solid_layout import rigid_motions as rigid_motions
 
 
 def _stiffness_scale(model: SolidFEModel, youngs, densities):

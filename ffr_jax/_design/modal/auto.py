@@ -3,6 +3,8 @@
 import equinox as eqx
 
 from ..assembly import FEModel
+from ..solid_assembly import SolidFEModel
+from ..solid_layout import SolidReductionLayout
 from .base import AbstractModalSolver
 from .dense import DenseModes
 from .interface import ReductionLayout
@@ -24,9 +26,10 @@ class AutoModes(AbstractModalSolver):
 
     max_dense_dof: int = eqx.field(static=True, default=MAX_DENSE_DOF)
 
-    def choose(self, model: FEModel) -> AbstractModalSolver:
+    def choose(self, model: FEModel | SolidFEModel) -> AbstractModalSolver:
         """The solver this option takes on `model`."""
         return DenseModes() if model.n_dof <= self.max_dense_dof else LanczosModes()
 
-    def solve(self, model: FEModel, youngs, densities, layout: ReductionLayout, n_modes: int):
+    def solve(self, model: FEModel | SolidFEModel, youngs, densities, layout: ReductionLayout | SolidReductionLayout,
+              n_modes: int):
         return self.choose(model).solve(model, youngs, densities, layout, n_modes)

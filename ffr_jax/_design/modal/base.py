@@ -7,6 +7,8 @@ import jax.numpy as jnp
 
 from ..._errors import DesignError, error_if
 from ..assembly import FEModel
+from ..solid_assembly import SolidFEModel
+from ..solid_layout import SolidReductionLayout
 from .interface import ReductionLayout
 
 
@@ -19,7 +21,8 @@ class AbstractModalSolver(eqx.Module):
     """
 
     @abc.abstractmethod
-    def solve(self, model: FEModel, youngs, densities, layout: ReductionLayout, n_modes: int):
+    def solve(self, model: FEModel | SolidFEModel, youngs, densities, layout: ReductionLayout | SolidReductionLayout,
+              n_modes: int):
         """The `n_modes` lowest eigenpairs with `layout.removed` held and the static modes.
 
         **Arguments:**
@@ -45,7 +48,7 @@ MECHANISM_MESSAGE = (
 )
 
 
-def stiffness_scale(model: FEModel, youngs, densities):
+def stiffness_scale(model: FEModel | SolidFEModel, youngs, densities):
     """`max_e E_e tr(K_e) / (rho_e tr(M_e))`: within a small factor of the largest eigenvalue `omega_max^2`.
 
     Each element's ratio is a mean of its Rayleigh quotients, so it lies below that element's
@@ -80,7 +83,7 @@ def check_modes(eigenvalues, modes, what: str, scale):
     return error_if((eigenvalues, modes), bad, f"{what}: {MECHANISM_MESSAGE}", DesignError)
 
 
-def check_size(layout: ReductionLayout, n_modes: int, margin: int, what: str) -> None:
+def check_size(layout: ReductionLayout | SolidReductionLayout, n_modes: int, margin: int, what: str) -> None:
     if not isinstance(n_modes, int) or not 0 < n_modes < layout.n_interior - margin:
         raise ValueError(
             f"n_modes={n_modes} must be a positive int smaller than the number of interior degrees of freedom "

@@ -8,6 +8,8 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..assembly import FEModel, dense_matrix
+from ..solid_assembly import SolidFEModel
+from ..solid_layout import SolidReductionLayout
 from .base import AbstractModalSolver, check_modes, check_size, stiffness_scale
 from .interface import ReductionLayout
 
@@ -75,7 +77,8 @@ class DenseModes(AbstractModalSolver):
     cost cubic in the number of degrees of freedom (use [`LanczosModes`][] beyond a few thousand).
     """
 
-    def solve(self, model: FEModel, youngs, densities, layout: ReductionLayout, n_modes: int):
+    def solve(self, model: FEModel | SolidFEModel, youngs, densities, layout: ReductionLayout | SolidReductionLayout,
+              n_modes: int):
         check_size(layout, n_modes, 0, "DenseModes")
         k = dense_matrix(model, youngs, "stiffness")
         m = dense_matrix(model, densities, "mass")

@@ -23,6 +23,7 @@ import hashlib
 import equinox as eqx
 import numpy as np
 
+from ..assembly import csc_matrices
 from ..mesh import QuadMesh, _format_ids
 
 
@@ -145,6 +146,10 @@ class ReductionLayout:
     @property
     def n_interior(self) -> int:
         return self.interior.size
+
+    def csc_matrices(self, youngs, densities, unit_stiffness, unit_mass):
+        """Host `K_II`, `M_II` (SciPy CSC) for element values `(n_elements,)` and unit matrices `(n_elements, 8, 8)`."""
+        return csc_matrices(self.mesh, youngs, densities, unit_stiffness, unit_mass, self.removed)
 
     def __hash__(self) -> int:
         return hash(self.digest)

@@ -50,7 +50,9 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse.linalg as spla
 
-from ..assembly import FEModel, csc_matrices
+from ..assembly import FEModel
+from ..solid_assembly import SolidFEModel
+from ..solid_layout import SolidReductionLayout
 from .base import AbstractModalSolver, check_modes, check_size, stiffness_scale
 from .interface import ReductionLayout
 
@@ -65,7 +67,7 @@ def _factorise(k):
     return spla.splu(k, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
 
 
-def _boundary_load(layout: ReductionLayout, youngs, unit_k) -> np.ndarray:
+def _boundary_load(layout: ReductionLayout | SolidReductionLayout, youngs, unit_k) -> np.ndarray:
     """`K U` for the interface patterns `U` (zero off the interfaces), `(n_dof, n_static)`, on the host."""
     mesh = layout.mesh
     u = np.zeros((mesh.n_dof, layout.n_static))
@@ -78,14 +80,14 @@ def _boundary_load(layout: ReductionLayout, youngs, unit_k) -> np.ndarray:
     return out
 
 
-def _host_forward(layout: ReductionLayout, n_modes: int, youngs, densities, unit_k, unit_m):
+def _host_forward(layout: ReductionLayout | SolidReductionLayout, n_modes: int, youngs, densities, unit_k, unit_m):
     """Host: eigenpairs of `(K_II, M_II)` and static modes, full size; NaN on failure."""
     youngs, densities, unit_k, unit_m = (np.asarray(a) for a in (youngs, densities, unit_k, unit_m))
     n_dof, interior = layout.mesh.n_dof, layout.interior
     lam_out = np.full(n_modes, np.nan)
     phi_out = np.zeros((n_dof, n_modes))
     psi_out = np.zeros((n_dof, layout.n_static))
-    k, m = csc_matrices(layout.mesh, youngs, densities, unit_k, unit_m, layout.removed)
+    k, m = layout.csc_matrices(youngs, densities, unit_k, unit_m)
     n = k.shape[0]
     try:
         lu = _factorise(k)
@@ -151,11 +153,11 @@ def _complement_solve(k, m, lu, lam, phi, rhs):
     return z
 
 
-def _host_backward(layout: ReductionLayout, youngs, densities, unit_k, unit_m, lam, phi, phi_bar, psi_bar):
+def _host_backward(layout: ReductionLayout | SolidReductionLayout, youngs, densities, unit_k, unit_m, lam, phi, phi_bar, psi_bar):
     """Host: the transposed solves `z` (eigenmodes) and `w` (static modes), full size."""
     youngs, densities, unit_k, unit_m = (np.asarray(a) for a in (youngs, densities, unit_k, unit_m))
     interior = layout.interior
-    k, m = csc_matrices(layout.mesh, youngs, densities, unit_k, unit_m, layout.removed)
+    k, m = layout.csc_matrices(youngs, densities, unit_k, unit_m)
     lu = _factorise(k)
     z = np.zeros_like(np.asarray(phi_bar))
     z[interior] = _complement_solve(k, m, lu, np.asarray(lam), np.asarray(phi)[interior],
@@ -202,7 +204,7 @@ def _lanczos_basis_bwd(layout, n_modes, residuals, cotangents):
         "Retain one more mode, or use DenseModes on small meshes.",
     )
 
-    def on_elements(v):  # (n_dof, k) -> (n_elements, 8, k)
+    def on_elements(v):  # (n_dof, k) -> (n_elements, d, k), d the element's degrees of freedom
         return v[element_dofs]
 
     phi_e, z_e = on_elements(phi), on_elements(z)
@@ -235,7 +237,8 @@ class LanczosModes(AbstractModalSolver):
     mode (`jax.jvp`) raises.
     """
 
-    def solve(self, model: FEModel, youngs, densities, layout: ReductionLayout, n_modes: int):
+    def solve(self, model: FEModel | SolidFEModel, youngs, densities, layout: ReductionLayout | SolidReductionLayout,
+              n_modes: int):
         check_size(layout, n_modes, 1, "LanczosModes (ARPACK needs n_modes < n - 1)")
         lam, phi, psi = _lanczos_basis(layout, n_modes, youngs, densities, model.unit_stiffness, model.unit_mass,
                                        model.element_dofs)
