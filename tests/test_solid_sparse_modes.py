@@ -27,6 +27,7 @@ import scipy.linalg
 from helpers import assert_close_relative
 
 import ffr_jax as fj
+from ffr_jax._design.solid_assembly import solid_csc_matrices
 from ffr_jax._design.solid_designed_body import SolidDesignedBody
 from ffr_jax._design.solid_layout import solid_reduction_layout
 
@@ -35,11 +36,11 @@ FD_RTOL, FD_STEP = 1e-6, 2e-3
 N_MODES = 4
 
 
-def _rod(nx, ny, nz, height, thickness, solver, faces=False):
+def _rod(nx, ny, nz, height, thickness, solver, faces=False, free=False):
     """A 1 m rod of `nx x ny x nz` H8 centred on the x-axis. Supports: the node line through the thickness at A
     (`x = 0, y = 0`) in x, y, z and at B (`x = 1`) in y, z (`faces=False`, the frame of `fj.cases.solid_rod`), or the
     whole end faces (`faces=True`: symmetric under the quarter turn about x when `ny = nz` and `height = thickness`);
-    markers the held node sets."""
+    markers those node sets; `free=True`: nothing held (free-free modes)."""
     grid = fj.box_grid(nx, ny, nz, 1.0, height, thickness)
     nodes = grid.nodes - np.array([0.0, height / 2, thickness / 2])
     mesh = fj.SolidMesh(nodes, grid.elements)
@@ -48,7 +49,8 @@ def _rod(nx, ny, nz, height, thickness, solver, faces=False):
     b = tuple(int(n) for n in np.flatnonzero(line & (np.abs(nodes[:, 0] - 1.0) < 1e-12)))
     fixed = tuple(sorted([3 * n + d for n in a for d in range(3)] + [3 * n + d for n in b for d in (1, 2)]))
     model = fj.SolidFEModel(mesh, fj.H8(), 0.3)
-    return SolidDesignedBody(model, fj.SolidDesignDomain(mesh), fj.SIMP(), N_MODES, fixed, (a, b), solver)
+    return SolidDesignedBody(model, fj.SolidDesignDomain(mesh), fj.SIMP(), N_MODES, () if free else fixed, (a, b),
+                             solver)
 
 
 def _design(body, seed):
@@ -153,5 +155,30 @@ def test_auto_modes_choose_by_size_and_bad_supports():
     body = _rod(4, 2, 2, 0.06, 0.02, fj.LanczosModes())
     with pytest.raises(ValueError, match="do not remove the rigid-body motions"):
         solid_reduction_layout(body.mesh, body.fixed_dofs[:3])  # A held alone: the turns about A's line are free
-    with pytest.raises(ValueError, match="LanczosModes needs supports"):
-        SolidDesignedBody(body.model, body.domain, body.material, N_MODES, (), body.markers, fj.LanczosModes())
+
+
+@pytest.mark.slow
+def test_free_part_lanczos_equals_dense():
+    """A free part (no supports): Lanczos computes the six rigid-body modes with a shift below zero and drops them;
+    its eigenpairs and body-data VJP equal `free_modes_dense`'s (which deflates the rigid modes to `sigma` above the
+    retained range) to the dense solution's accuracy (module docstring), and its VJP equals central differences
+    (the rigid-body part of the derivative, `-R R^T dM Phi`, matters: without it the mass terms are off)."""
+    dense = _rod(10, 2, 2, 0.06, 0.02, fj.DenseModes(), free=True)
+    lanczos = _rod(10, 2, 2, 0.06, 0.02, fj.LanczosModes(), free=True)
+    x = _design(dense, 0.5)
+    (lam_d, phi_d), (lam_l, phi_l) = _eigenpairs(dense, x), _eigenpairs(lanczos, x)
+    youngs, densities = (np.asarray(v) for v in dense.element_values(x))
+    k, m = (a.toarray() for a in solid_csc_matrices(dense.model, youngs, densities))
+    lam_all = scipy.linalg.eigh(k, m, eigvals_only=True)  # six rigid ones (zero to round-off), then the elastic ones
+    accuracy = k.shape[0] * EPS * lam_all[-1]
+    np.testing.assert_allclose(lam_l, lam_d, rtol=0, atol=2 * accuracy, err_msg="free-free eigenvalues")
+    span_rtol = 2 * accuracy / (lam_all[6 + N_MODES] - lam_all[5 + N_MODES]) * np.sqrt(np.linalg.cond(m))
+    assert_close_relative(np.asarray(phi_l) @ (m @ np.asarray(phi_l)).T, np.asarray(phi_d) @ (m @ np.asarray(phi_d)).T,
+                          span_rtol, "free-free projector")
+    value_d, g_d = _value_and_grad(dense, x)
+    value, g_l = _value_and_grad(lanczos, x)
+    assert_close_relative(float(value), float(value_d), span_rtol, "free-free body-data invariants")
+    assert_close_relative(g_l, g_d, span_rtol, "free-free body-data VJP (Lanczos vs dense)")
+    direction = jnp.asarray(np.random.default_rng(3).uniform(-1.0, 1.0, lanczos.n_design))
+    fd = _five_point(lambda y: _value(lanczos, y), x, direction)
+    np.testing.assert_allclose(float(g_l @ direction), fd, rtol=FD_RTOL, err_msg="free-free Lanczos VJP vs FD")

@@ -10,7 +10,9 @@ interior problem (the supports held): [`DenseModes`][] (dense, subspace-stable [
 time about linear in the mesh size, to 10^5 elements) or [`AutoModes`][] (the default: Lanczos above 1,000 degrees
 of freedom). Both derivatives divide only by gaps between retained and discarded eigenvalues, so they stay finite and
 exact for span-invariant quantities (the body data) where retained eigenvalues cross or coincide. A free part (no
-supports) takes the dense [`free_modes_dense`][] whatever the option.
+supports) takes [`free_modes_dense`][] where the option picks the dense solver, and [`LanczosModes`][] otherwise (the
+six rigid-body modes computed with a shift below zero and dropped; their part of the derivative, `-R R^T dM Phi`, is
+exact because `K R = 0` for every design).
 """
 
 import equinox as eqx
@@ -24,7 +26,7 @@ from .element.solid_base import AbstractSolidElement
 from .material import SIMP
 from .modal.auto import AutoModes
 from .modal.base import AbstractModalSolver
-from .modal.lanczos import LanczosModes
+from .modal.dense import DenseModes
 from .solid_assembly import SolidFEModel, SolidOperator
 from .solid_domain import SolidDesignDomain
 from .solid_groups import PhysicalGroups
@@ -60,10 +62,6 @@ class SolidDesignedBody(eqx.Module):
         if not isinstance(self.modal_solver, AbstractModalSolver):
             raise TypeError(f"modal_solver must be DenseModes(), LanczosModes() or AutoModes(), got "
                             f"{self.modal_solver!r}.")
-        if not self.fixed_dofs and isinstance(self.modal_solver, LanczosModes):
-            raise ValueError("LanczosModes needs supports (reference conditions that remove the six rigid motions, "
-                             "e.g. supports={'big_bore': 'xyz', 'small_bore': 'yz'}); a free part's modes are dense "
-                             "(free_modes_dense): pass supports, or modal_solver=AutoModes().")
         free = self.model.n_dof - len(self.fixed_dofs) - (0 if self.fixed_dofs else 6)
         if not isinstance(self.n_modes, int) or not 0 < self.n_modes < free:
             raise ValueError(f"n_modes={self.n_modes} must be a positive int below the {free} free degrees of freedom "
@@ -75,8 +73,8 @@ class SolidDesignedBody(eqx.Module):
 
     @property
     def layout(self) -> SolidReductionLayout:
-        """The held (supports) and interior degrees of freedom of the modal problem (a part with supports only); a
-        `ValueError` where the supports leave a rigid motion free (checked when the modes are first computed)."""
+        """The held (supports) and interior degrees of freedom of the modal problem; a `ValueError` where the supports
+        leave a rigid motion free (checked when the modes are first computed)."""
         return solid_reduction_layout(self.model.mesh, self.fixed_dofs)
 
     @property
@@ -107,9 +105,10 @@ class SolidDesignedBody(eqx.Module):
         """`(lam, Phi)`: the `n_modes` lowest `omega^2` `(n_modes,)` and M-orthonormal modes `(n_dof, n_modes)`,
         zero on the held degrees of freedom (with no supports: the lowest elastic modes of the free part)."""
         youngs, densities = self.element_values(x)
-        if not self.fixed_dofs:
+        solver = self.modal_solver.choose(self.model) if isinstance(self.modal_solver, AutoModes) else self.modal_solver
+        if not self.fixed_dofs and isinstance(solver, DenseModes):
             return free_modes_dense(self.model, youngs, densities, self.n_modes)
-        return self.modal_solver.solve(self.model, youngs, densities, self.layout, self.n_modes)
+        return solver.solve(self.model, youngs, densities, self.layout, self.n_modes)
 
     def frequencies(self, x):
         """Eigenfrequencies of the retained modes in Hz, `(n_modes,)`."""
@@ -152,7 +151,7 @@ def solid_designed_body(groups: PhysicalGroups, n_modes: int, *, markers: tuple[
     - `solid`, `void`: names of physical volumes that are passive solid or passive void (no design variable).
     - `element`: [`H8`][] (default), [`H11`][] or [`Tet10`][] (matching the mesh); `poisson`; `material`.
     - `modal_solver`: [`AutoModes`][] (default: sparse [`LanczosModes`][] above 1,000 degrees of freedom),
-      [`DenseModes`][] or [`LanczosModes`][] (a part with supports; a free part's modes are always dense).
+      [`DenseModes`][] or [`LanczosModes`][] (with supports or free).
 
     **Returns:** a [`SolidDesignedBody`][].
 

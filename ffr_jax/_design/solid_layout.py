@@ -1,9 +1,10 @@
-"""The layout of a supported solid part's modal basis: held and interior degrees of freedom.
+"""The layout of a solid part's modal basis: held and interior degrees of freedom.
 
 The solid counterpart of `ReductionLayout` for the modal solvers (`DenseModes`, `LanczosModes`,
 `AutoModes`): the supports (reference conditions of the floating frame) are held, everything else is
-interior; no interfaces, so no static modes. The held degrees of freedom must remove the six rigid motions
-(`rigid_motions` restricted to them has rank 6), so that `K_II` is positive definite.
+interior; no interfaces, so no static modes. Held degrees of freedom must remove the six rigid motions
+(`rigid_motions` restricted to them has rank 6), so that `K_II` is positive definite; with none held (a free
+part) the layout has six rigid-body modes (`n_rigid`, `rigid`), which `LanczosModes` computes and drops.
 """
 
 import functools
@@ -37,9 +38,11 @@ class SolidReductionLayout:
 
     Offers what the modal solvers read from a `ReductionLayout`: `mesh`, `fixed`, `boundary` (empty),
     `patterns` `(0, 0)`, `removed` (= `fixed`), `interior`, `touching` (empty), `n_static` (0), `n_interior`,
-    and `csc_matrices` (the host `K_II`, `M_II`).
+    `n_rigid` (6 for a free part, else 0), `rigid` (the rigid motions `(n_dof, n_rigid)`) and `csc_matrices`
+    (the host `K_II`, `M_II`).
 
-    **Raises** `ValueError` if a held degree of freedom is not on the mesh or the held ones leave a rigid motion free.
+    **Raises** `ValueError` if a held degree of freedom is not on the mesh or the held ones (if any) leave a rigid
+    motion free.
     """
 
     def __init__(self, mesh: SolidMesh, fixed: tuple[int, ...]):
@@ -49,7 +52,7 @@ class SolidReductionLayout:
         if bad:
             raise ValueError(f"Held degrees of freedom {bad[:6]} are not on the mesh ({mesh.n_dof} dofs).")
         rank = int(np.linalg.matrix_rank(rigid_motions(mesh.nodes)[list(self.fixed)], tol=1e-9)) if self.fixed else 0
-        if rank < 6:
+        if self.fixed and rank < 6:
             raise ValueError(
                 f"The supports do not remove the rigid-body motions of the solid part (the held degrees of freedom "
                 f"constrain rank {rank} of its 6 rigid motions): hold x, y, z on a face or node set, and y, z on a "
@@ -74,6 +77,16 @@ class SolidReductionLayout:
     @property
     def n_interior(self) -> int:
         return self.interior.size
+
+    @property
+    def n_rigid(self) -> int:
+        """Rigid-body modes of the interior problem: six for a free part, none with supports."""
+        return 0 if self.fixed else 6
+
+    @property
+    def rigid(self) -> np.ndarray:
+        """The rigid motions left free, `(n_dof, n_rigid)`."""
+        return rigid_motions(self.mesh.nodes)[:, : self.n_rigid]
 
     def csc_matrices(self, youngs, densities, unit_stiffness, unit_mass) -> tuple[sp.csc_matrix, sp.csc_matrix]:
         """Host `K_II`, `M_II` (SciPy CSC) for element values `(n_elements,)` and unit matrices `(n_elements, d, d)`."""

@@ -80,6 +80,9 @@ class DenseModes(AbstractModalSolver):
     def solve(self, model: FEModel | SolidFEModel, youngs, densities, layout: ReductionLayout | SolidReductionLayout,
               n_modes: int):
         check_size(layout, n_modes, 0, "DenseModes")
+        if layout.n_rigid:
+            raise ValueError("DenseModes needs reference conditions that remove the rigid-body motions; the modes of a "
+                             "free solid part are free_modes_dense (dense) or LanczosModes (sparse).")
         k = dense_matrix(model, youngs, "stiffness")
         m = dense_matrix(model, densities, "mass")
         interior = layout.interior

@@ -147,6 +147,11 @@ class ReductionLayout:
     def n_interior(self) -> int:
         return self.interior.size
 
+    @property
+    def n_rigid(self) -> int:
+        """Rigid-body modes left free: none (the reference conditions remove the plane rigid motions)."""
+        return 0
+
     def csc_matrices(self, youngs, densities, unit_stiffness, unit_mass):
         """Host `K_II`, `M_II` (SciPy CSC) for element values `(n_elements,)` and unit matrices `(n_elements, 8, 8)`."""
         return csc_matrices(self.mesh, youngs, densities, unit_stiffness, unit_mass, self.removed)

@@ -35,6 +35,11 @@ number `lam_{n+1} / (lam_{n+1} - lam_i)`), all columns at once.
 Every host array crosses the callback at full size `(n_dof, k)` (zero on held degrees of
 freedom), so no index array of the mesh is ever a constant of the compiled program.
 
+The same code serves planar and solid bodies: the element matrices are `(n_elements, d, d)` for
+any element (`d = 8` for Q4, 24 for H8 and H11, 30 for Tet10), and the layout (a
+`ReductionLayout`, or a supported solid part's `SolidReductionLayout`) assembles the host `K_II`,
+`M_II`.
+
 !!! cite "References"
     R. B. Nelson, "Simplified calculation of eigenvector derivatives", AIAA J. 14 (1976).
 
@@ -60,6 +65,10 @@ from .interface import ReductionLayout
 # Relative residual of the complement solves, and their iteration budget.
 SOLVE_RTOL = 1e-12
 SOLVE_MAXITER = 1000
+# A free body (rigid-body modes left by the layout): the shift below zero, as a fraction of the stiffness scale, that
+# makes `K - sigma M` positive definite, and the bound below which an eigenvalue counts as a rigid-body one.
+RIGID_SHIFT = 1e-8
+RIGID_BOUND = 1e-10
 
 
 def _factorise(k):
@@ -80,25 +89,40 @@ def _boundary_load(layout: ReductionLayout | SolidReductionLayout, youngs, unit_
     return out
 
 
+def _host_scale(youngs, densities, unit_k, unit_m) -> float:
+    """`stiffness_scale` on the host: `max_e E_e tr(K_e) / (rho_e tr(M_e))`."""
+    return float(np.max(youngs * np.trace(unit_k, axis1=1, axis2=2) / (densities * np.trace(unit_m, axis1=1, axis2=2))))
+
+
+def _shift(layout, youngs, densities, unit_k, unit_m) -> float:
+    """The shift `sigma` of the factor `K_II - sigma M_II`: 0, or below zero for a layout with rigid-body modes."""
+    return -RIGID_SHIFT * _host_scale(youngs, densities, unit_k, unit_m) if layout.n_rigid else 0.0
+
+
 def _host_forward(layout: ReductionLayout | SolidReductionLayout, n_modes: int, youngs, densities, unit_k, unit_m):
-    """Host: eigenpairs of `(K_II, M_II)` and static modes, full size; NaN on failure."""
+    """Host: eigenpairs of `(K_II, M_II)` and static modes, full size; NaN on failure.
+
+    With `layout.n_rigid = r > 0` (a free solid part) the `n_modes + r` lowest pairs are computed with the shift
+    `sigma < 0` and the `r` lowest, which must be the rigid-body modes (below `RIGID_BOUND` of the stiffness scale,
+    the next one above), are dropped; otherwise NaN."""
     youngs, densities, unit_k, unit_m = (np.asarray(a) for a in (youngs, densities, unit_k, unit_m))
     n_dof, interior = layout.mesh.n_dof, layout.interior
     lam_out = np.full(n_modes, np.nan)
     phi_out = np.zeros((n_dof, n_modes))
     psi_out = np.zeros((n_dof, layout.n_static))
     k, m = layout.csc_matrices(youngs, densities, unit_k, unit_m)
-    n = k.shape[0]
+    n, n_rigid = k.shape[0], layout.n_rigid
+    sigma = _shift(layout, youngs, densities, unit_k, unit_m)
     try:
-        lu = _factorise(k)
+        lu = _factorise((k - sigma * m).tocsc() if n_rigid else k)
     except RuntimeError:  # exactly singular K_II
         phi_out[:] = np.nan
         return lam_out, phi_out, psi_out
     op = spla.LinearOperator((n, n), matvec=lu.solve, dtype=float)
     v0 = np.random.default_rng(0).standard_normal(n)
-    ncv = min(n - 1, max(2 * n_modes + 1, 20))
+    ncv = min(n - 1, max(2 * (n_modes + n_rigid) + 1, 20))
     try:
-        _, basis = spla.eigsh(k, n_modes, M=m, sigma=0.0, OPinv=op, v0=v0, ncv=ncv, tol=0.0)
+        _, basis = spla.eigsh(k, n_modes + n_rigid, M=m, sigma=sigma, OPinv=op, v0=v0, ncv=ncv, tol=0.0)
     except (spla.ArpackNoConvergence, spla.ArpackError):
         phi_out[:] = np.nan
         return lam_out, phi_out, psi_out
@@ -106,6 +130,12 @@ def _host_forward(layout: ReductionLayout | SolidReductionLayout, n_modes: int, 
     k_r = basis.T @ (k @ basis)
     m_r = basis.T @ (m @ basis)
     lam, rot = scipy.linalg.eigh(0.5 * (k_r + k_r.T), 0.5 * (m_r + m_r.T))
+    if n_rigid:
+        bound = RIGID_BOUND * _host_scale(youngs, densities, unit_k, unit_m)
+        if not (np.all(np.abs(lam[:n_rigid]) < bound) and lam[n_rigid] > bound):  # a mechanism or detached piece
+            phi_out[:] = np.nan
+            return lam_out, phi_out, psi_out
+        lam, rot = lam[n_rigid:], rot[:, n_rigid:]
     phi_out[interior] = basis @ rot
     if layout.n_static:
         load = _boundary_load(layout, youngs, unit_k)
@@ -118,8 +148,10 @@ def _complement_solve(k, m, lu, lam, phi, rhs):
     """`z_i` with `(K - lam_i M) z_i = -(I - M Phi Phi^T) rhs_i`, `Phi^T M z_i = 0`, all columns.
 
     Preconditioned conjugate gradients on the M-orthogonal complement of `Phi`, where every
-    `K - lam_i M` is positive definite; preconditioner `(I - Phi Phi^T M) K^-1`. NaN columns
-    where a column does not converge.
+    `K - lam_i M` is positive definite; preconditioner `(I - Phi Phi^T M) K^-1` (`lu` the factor of
+    `K`, or of `K - sigma M`). `Phi` `(n, p)` may hold more columns than `lam` (`(k,)`, `k <= p`):
+    the first `p - k` (a free body's rigid-body modes) are projected out and not solved for. NaN
+    columns where a column does not converge.
     """
     m_phi = m @ phi
     b = -(rhs - m_phi @ (phi.T @ rhs))
@@ -153,19 +185,30 @@ def _complement_solve(k, m, lu, lam, phi, rhs):
     return z
 
 
-def _host_backward(layout: ReductionLayout | SolidReductionLayout, youngs, densities, unit_k, unit_m, lam, phi, phi_bar, psi_bar):
-    """Host: the transposed solves `z` (eigenmodes) and `w` (static modes), full size."""
+def _host_backward(layout: ReductionLayout | SolidReductionLayout, youngs, densities, unit_k, unit_m, lam, phi,
+                   phi_bar, psi_bar):
+    """Host: the transposed solves `z` (eigenmodes) and `w` (static modes), and `v = R R^T phi_bar` (the
+    M-orthonormal rigid-body modes `R` of a free body; zero otherwise), full size."""
     youngs, densities, unit_k, unit_m = (np.asarray(a) for a in (youngs, densities, unit_k, unit_m))
     interior = layout.interior
     k, m = layout.csc_matrices(youngs, densities, unit_k, unit_m)
-    lu = _factorise(k)
+    sigma = _shift(layout, youngs, densities, unit_k, unit_m)
+    lu = _factorise((k - sigma * m).tocsc() if layout.n_rigid else k)
+    phi_i, phi_bar_i = np.asarray(phi)[interior], np.asarray(phi_bar)[interior]
+    v = np.zeros_like(np.asarray(phi_bar))
+    held = phi_i
+    if layout.n_rigid:
+        rigid = layout.rigid[interior]
+        chol = np.linalg.cholesky(rigid.T @ (m @ rigid))
+        rigid = scipy.linalg.solve_triangular(chol, rigid.T, lower=True).T  # R^T M R = I
+        held = np.concatenate([rigid, phi_i], axis=1)
+        v[interior] = rigid @ (rigid.T @ phi_bar_i)
     z = np.zeros_like(np.asarray(phi_bar))
-    z[interior] = _complement_solve(k, m, lu, np.asarray(lam), np.asarray(phi)[interior],
-                                    np.asarray(phi_bar)[interior])
+    z[interior] = _complement_solve(k, m, lu, np.asarray(lam), held, phi_bar_i)
     w = np.zeros_like(np.asarray(psi_bar))
     if layout.n_static:
         w[interior] = lu.solve(np.ascontiguousarray(np.asarray(psi_bar)[interior]))
-    return z, w
+    return z, w, v
 
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
@@ -191,9 +234,10 @@ def _lanczos_basis_fwd(layout, n_modes, youngs, densities, unit_k, unit_m, eleme
 def _lanczos_basis_bwd(layout, n_modes, residuals, cotangents):
     youngs, densities, unit_k, unit_m, element_dofs, lam, phi, psi = residuals
     lam_bar, phi_bar, psi_bar = cotangents
-    z, w = jax.pure_callback(
+    z, w, v = jax.pure_callback(
         functools.partial(_host_backward, layout),
-        (jax.ShapeDtypeStruct(phi.shape, phi.dtype), jax.ShapeDtypeStruct(psi.shape, psi.dtype)),
+        (jax.ShapeDtypeStruct(phi.shape, phi.dtype), jax.ShapeDtypeStruct(psi.shape, psi.dtype),
+         jax.ShapeDtypeStruct(phi.shape, phi.dtype)),
         youngs, densities, unit_k, unit_m, lam, phi, phi_bar, psi_bar,
         vmap_method="sequential",
     )
@@ -218,6 +262,8 @@ def _lanczos_basis_bwd(layout, n_modes, residuals, cotangents):
         - jnp.einsum("eai,eai,i->e", z_e, m_phi, lam)
         - 0.5 * jnp.einsum("eai,eaj,ij->e", phi_e, m_phi, g_sym)
     )
+    if layout.n_rigid:  # the rigid-body part of dPhi: -R R^T dM Phi (K R = 0 for every design)
+        densities_bar = densities_bar - jnp.einsum("eai,eai->e", on_elements(v), m_phi)
     if layout.n_static:
         psi_e, w_e = on_elements(psi), on_elements(w)
         youngs_bar = youngs_bar - jnp.einsum("eas,eab,ebs->e", w_e, unit_k, psi_e)
@@ -231,7 +277,8 @@ class LanczosModes(AbstractModalSolver):
     """Sparse shift-invert Lanczos (SciPy ARPACK + SuperLU on the host) with a reverse-mode derivative.
 
     Same result as [`DenseModes`][] (the lowest eigenpairs of the interior problem,
-    mass-normalised, and the static modes), with memory and time about linear in the mesh size;
+    mass-normalised, and the static modes), with memory and time about linear in the mesh size
+    (planar bodies, and solid parts with supports: [`SolidDesignedBody`][]);
     the derivative of the module docstring. Works under `jax.jit` and `jax.vmap` (designs are
     solved one after another on the host); reverse mode only (`jax.grad`, `jax.vjp`): forward
     mode (`jax.jvp`) raises.
@@ -239,7 +286,8 @@ class LanczosModes(AbstractModalSolver):
 
     def solve(self, model: FEModel | SolidFEModel, youngs, densities, layout: ReductionLayout | SolidReductionLayout,
               n_modes: int):
-        check_size(layout, n_modes, 1, "LanczosModes (ARPACK needs n_modes < n - 1)")
+        check_size(layout, n_modes, 1 + layout.n_rigid, "LanczosModes (ARPACK needs n_modes < n - 1; a free body's "
+                   "rigid-body modes count too)")
         lam, phi, psi = _lanczos_basis(layout, n_modes, youngs, densities, model.unit_stiffness, model.unit_mass,
                                        model.element_dofs)
         modes = jnp.concatenate([phi, psi], axis=1) if layout.n_static else phi
