@@ -157,6 +157,26 @@ def main():
                                 "psi": float(value)}) + "\n")
         return value, grad
 
+    unravel = None
+    if isinstance(x0, dict):
+        # fj.optimize flattens a dict design with a wrapper that drops `compiles_itself`, so it would trace this
+        # timed function into a program of its own (no timing possible, and the case's kept programs unused):
+        # the flattening is done here instead, with the driver's own (internal) constraint wrapper.
+        from jax.flatten_util import ravel_pytree
+
+        from ffr_jax._optimize._pytree import Raveled
+
+        x0, unravel = ravel_pytree(x0)
+        dict_fun = fun
+
+        def fun(x, beta):
+            value, grad = dict_fun(unravel(x), beta)
+            return value, ravel_pytree(grad)[0]
+
+        for name in ("projection", "compiles_itself", "fingerprint"):
+            setattr(fun, name, getattr(dict_fun, name))
+        constraint = Raveled(constraint, unravel)
+
     for name in ("projection", "compiles_itself", "design_size", "fingerprint"):
         if hasattr(fun, name):
             setattr(timed_fun, name, getattr(fun, name))
@@ -171,6 +191,8 @@ def main():
     with (args.out / "sessions.jsonl").open("a") as f:
         f.write(json.dumps({"session": session, "run_s": session_s, "setup_s": setup_s, "resumed": resume,
                             "load_before": load_before, "load_after": os.getloadavg()}) + "\n")
+    if unravel is not None:
+        result = result._replace(x=unravel(result.x))
     h = result.history
     beta_last = fj.beta_continuation()(h.steps - 1)
     x_phys = fj.physical_densities(result.x, filt, projection, beta_last)
