@@ -29,6 +29,9 @@ from ._design import (H8 as H8, H11 as H11, Tet10 as Tet10, SolidMesh as SolidMe
 from ._design.solid_groups import (PhysicalGroups as PhysicalGroups, read_solid_groups as read_solid_groups,
                                    solid_groups_from_meshio as solid_groups_from_meshio)
 from ._design.solid_domain import SolidDesignDomain as SolidDesignDomain
+from ._design.planar_groups import (PlanarGroups as PlanarGroups, planar_groups_from_meshio as planar_groups_from_meshio,
+                                    read_planar_groups as read_planar_groups)
+from ._design.link_profile import Hole as Hole, QuadMeshing as QuadMeshing, Slot as Slot, link_profile as link_profile
 from ._design.solid_designed_body import SolidDesignedBody as SolidDesignedBody, solid_designed_body as solid_designed_body
 from ._design.solid_design_map import SolidDesignMap as SolidDesignMap
 from ._api import check_gradient as check_gradient

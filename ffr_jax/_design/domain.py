@@ -8,6 +8,8 @@ from jaxtyping import Array, Float, Int
 from .._checks import DESIGN_SLACK, design_array, design_values, is_traced
 from .._errors import DesignError, error_if
 from .mesh import QuadMesh, StructuredGrid, _format_ids
+from .named_groups import masks_by_name
+from .planar_groups import PlanarGroups
 
 DESIGN, SOLID, VOID = 0, 1, 2
 _ROLE_NAMES = {DESIGN: "design", SOLID: "passive solid", VOID: "passive void"}
@@ -85,7 +87,8 @@ class DesignDomain(eqx.Module):
     - `design_elements`: `(n_design,)` element index of each design variable (a pytree leaf, so
       that a compiled program receives it as an input rather than as a constant).
 
-    Build it with [`DesignDomain.from_masks`][] or from a role array.
+    Build it with [`DesignDomain.from_masks`][], [`DesignDomain.from_groups`][] (passive regions by the names of
+    the mesh's physical surfaces) or from a role array.
     """
 
     mesh: QuadMesh = eqx.field(static=True)
@@ -106,6 +109,18 @@ class DesignDomain(eqx.Module):
     def from_masks(cls, mesh: QuadMesh, solid=None, void=None) -> "DesignDomain":
         """Roles from boolean element masks `(n_elements,)`: `solid` and `void` (disjoint), the rest design."""
         return cls(mesh, roles_from_masks(mesh.n_elements, solid, void))
+
+    @classmethod
+    def from_groups(cls, groups: PlanarGroups, solid: tuple[str, ...] = (),
+                    void: tuple[str, ...] = ()) -> "DesignDomain":
+        """Passive regions by name: the elements of the physical surfaces `solid` (a name or a tuple of names) are
+        passive solid, those of `void` passive void, the rest design (e.g. `solid=("rims",)` on a
+        [`link_profile`][] or a [`read_planar_groups`][] part). An unknown name or a curve group is a `ValueError`
+        naming the groups."""
+        if not isinstance(groups, PlanarGroups):
+            raise TypeError(f"groups must be PlanarGroups (fj.read_planar_groups, fj.link_profile), got "
+                            f"{type(groups).__name__}.")
+        return cls.from_masks(groups.mesh, **masks_by_name(groups, groups.mesh.n_elements, solid, void))
 
     def role_array(self) -> np.ndarray:
         """The roles as a NumPy array (host side: filters, plots)."""

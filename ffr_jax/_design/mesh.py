@@ -12,9 +12,10 @@ nodes `elements[e]`, counter-clockwise.
 """
 
 import hashlib
-import pathlib
 
 import numpy as np
+
+from .named_groups import read_meshio
 
 
 # Gauss points of the 2x2 rule and the corners of the reference square, counter-clockwise.
@@ -158,8 +159,9 @@ class QuadMesh:
         if distorted.size:
             raise ValueError(
                 f"Elements {_format_ids(distorted)} are badly distorted (corner Jacobian ratio "
-                f"{ratio[distorted].min():.3g} < {min_ratio}); remesh them, or lower min_jacobian_ratio "
-                "if you accept the loss of accuracy."
+                f"{ratio[distorted].min():.3g} < {min_ratio}); remesh them (smaller or smoothed elements there), or "
+                "pass a lower min_jacobian_ratio (an argument of QuadMesh, from_meshio, read_mesh and "
+                "read_planar_groups) if you accept the loss of accuracy."
             )
         return elements
 
@@ -196,8 +198,9 @@ class QuadMesh:
             )
 
     @staticmethod
-    def without_unused_nodes(nodes, elements) -> "tuple[QuadMesh, np.ndarray]":
-        """The mesh on the nodes that some element uses, renumbered in their original order.
+    def without_unused_nodes(nodes, elements, **kwargs) -> "tuple[QuadMesh, np.ndarray]":
+        """The mesh on the nodes that some element uses, renumbered in their original order (`kwargs`:
+        `orientation`, `min_jacobian_ratio` of the [`QuadMesh`][]).
 
         **Returns:** `(mesh, kept)`, `kept[i]` the original index of new node `i`.
         """
@@ -207,7 +210,7 @@ class QuadMesh:
         kept = np.unique(elements.ravel())
         renumber = np.full(nodes.shape[0], -1, dtype=np.int64)
         renumber[kept] = np.arange(kept.size)
-        return QuadMesh(nodes[kept], renumber[elements]), kept
+        return QuadMesh(nodes[kept], renumber[elements], **kwargs), kept
 
     def __setattr__(self, name, value):
         if hasattr(self, "_hash"):
@@ -353,7 +356,7 @@ def structured_grid(nx: int, ny: int, length: float, height: float) -> Structure
 _UNSUPPORTED_2D = ("triangle", "triangle6", "triangle7", "quad8", "quad9", "polygon")
 
 
-def from_meshio(mesh) -> QuadMesh:
+def from_meshio(mesh, min_jacobian_ratio: float | None = None) -> QuadMesh:
     """A [`QuadMesh`][] from a `meshio.Mesh`: its `quad` cells, nodes not used by them dropped.
 
     Lines and vertices (boundary and point entities, as gmsh writes them) are ignored; nodes used
@@ -362,7 +365,9 @@ def from_meshio(mesh) -> QuadMesh:
     polygons and volume cells (a clear error: recombine to linear quadrilaterals, e.g. gmsh
     `Mesh.RecombineAll = 1` and `Mesh.ElementOrder = 1`), and points off the plane `z = 0`.
 
-    Cell data of the quads (e.g. `gmsh:physical`) in the same element order: `quad_cell_data`.
+    Cell data of the quads (e.g. `gmsh:physical`) in the same element order: `quad_cell_data`; the
+    named physical groups: [`planar_groups_from_meshio`][]. `min_jacobian_ratio`: passed to the
+    [`QuadMesh`][] (default its own, 0.05).
     """
     points = np.asarray(mesh.points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] not in (2, 3):
@@ -384,7 +389,8 @@ def from_meshio(mesh) -> QuadMesh:
     if not quads:
         raise ValueError("The mesh has no 'quad' cells.")
     elements = np.concatenate(quads, axis=0)
-    return QuadMesh.without_unused_nodes(points, elements)[0]
+    quality = {} if min_jacobian_ratio is None else {"min_jacobian_ratio": min_jacobian_ratio}
+    return QuadMesh.without_unused_nodes(points, elements, **quality)[0]
 
 
 def quad_cell_data(mesh) -> dict[str, np.ndarray]:
@@ -395,21 +401,15 @@ def quad_cell_data(mesh) -> dict[str, np.ndarray]:
     return out
 
 
-def read_mesh(path) -> QuadMesh:
+def read_mesh(path, min_jacobian_ratio: float | None = None) -> QuadMesh:
     """Read a quadrilateral mesh from any file `meshio` reads (`.msh`, `.vtu`, `.inp`, `.med`, ...).
 
-    See [`from_meshio`][] for what is supported.
+    See [`from_meshio`][] for what is supported; `min_jacobian_ratio` is passed to the [`QuadMesh`][]
+    (default its own, 0.05). A gmsh file's named physical groups: [`read_planar_groups`][].
     """
-    import meshio
-
-    if not pathlib.Path(path).is_file():
-        raise FileNotFoundError(f"read_mesh: no mesh file at {str(path)!r}.")
-    try:
-        mesh = meshio.read(path)
-    except (Exception, SystemExit) as err:  # meshio exits (SystemExit) on some unreadable files
-        raise ValueError(f"read_mesh: meshio could not read {str(path)!r} ({type(err).__name__}: {err}); give a "
-                         "mesh file meshio reads (.msh, .vtu, .inp, .med, ...) with its usual extension.") from None
-    return from_meshio(mesh)
+    mesh = read_meshio(path, "read_mesh", "give a mesh file meshio reads (.msh, .vtu, .inp, .med, ...) with its "
+                       "usual extension.")
+    return from_meshio(mesh, min_jacobian_ratio)
 
 
 def write_mesh(path, mesh: QuadMesh, cell_data: dict[str, np.ndarray] | None = None,

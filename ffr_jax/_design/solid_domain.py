@@ -6,6 +6,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .domain import checked_design, checked_roles, element_densities, roles_from_masks
+from .named_groups import masks_by_name
 from .solid_groups import PhysicalGroups
 from .solid_mesh import SolidMesh
 
@@ -49,15 +50,7 @@ class SolidDesignDomain(eqx.Module):
         passive void, the rest design. An unknown name or a surface group is a `ValueError` naming the groups."""
         if not isinstance(groups, PhysicalGroups):
             raise TypeError(f"groups must be PhysicalGroups (fj.read_solid_groups), got {type(groups).__name__}.")
-        masks = {}
-        for label, names in (("solid", solid), ("void", void)):
-            if isinstance(names, str):
-                names = (names,)
-            mask = np.zeros(groups.mesh.n_elements, dtype=bool)
-            for name in names:
-                mask[groups.elements(name)] = True
-            masks[label] = mask
-        return cls.from_masks(groups.mesh, **masks)
+        return cls.from_masks(groups.mesh, **masks_by_name(groups, groups.mesh.n_elements, solid, void))
 
     def design_centroids(self) -> np.ndarray:
         """Centroids `(n_design, 3)` of the design elements (mean of their nodes), in design order."""

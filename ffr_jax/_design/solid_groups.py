@@ -9,11 +9,10 @@ no searching of nodes by distance. Unknown names, a group of the wrong dimension
 `ValueError`s naming the group and the fix.
 """
 
-import pathlib
-
 import numpy as np
 
 from .element.solid_base import _format_ids
+from .named_groups import TAG as _TAG, NamedGroups, physical_names, read_meshio
 from .solid_mesh import SolidMesh, _SOLID_CELLS, solid_from_meshio
 
 # Corner-node faces of each solid cell (VTK/meshio node order): a face is the sorted tuple of its corners.
@@ -23,7 +22,6 @@ _CELL_FACES = {
 }
 # Corners of the surface cells gmsh writes for a physical surface.
 _FACE_CORNERS = {"triangle": 3, "triangle6": 3, "quad": 4, "quad8": 4, "quad9": 4}
-_TAG = "gmsh:physical"
 
 
 def _face_keys(faces: np.ndarray) -> np.ndarray:
@@ -38,37 +36,21 @@ def boundary_faces(mesh: SolidMesh) -> np.ndarray:
     return keys[counts == 1]
 
 
-class PhysicalGroups:
+class PhysicalGroups(NamedGroups):
     """The physical groups of a solid mesh, by name (see the module docstring). Build it with
     [`read_solid_groups`][] or `solid_groups_from_meshio`.
 
     **Attributes:** `mesh`, the [`SolidMesh`][]; `dimensions`, `{name: 2 (surface) or 3 (volume)}`.
     """
 
-    __slots__ = ("mesh", "dimensions", "_elements", "_faces", "_face_nodes")
+    __slots__ = ("_elements", "_faces", "_face_nodes")
+    _KINDS = {2: "surface", 3: "volume"}
+    _WANTS = {2: "a physical surface (faces)", 3: "a physical volume (elements)"}
+    _DEFINE = 'Physical Surface("{name}") = {{...}}; or Physical Volume'
 
     def __init__(self, mesh: SolidMesh, dimensions: dict, elements: dict, faces: dict, face_nodes: dict):
         self.mesh, self.dimensions = mesh, dict(dimensions)
         self._elements, self._faces, self._face_nodes = elements, faces, face_nodes
-
-    def __repr__(self) -> str:
-        return f"PhysicalGroups({self._listing()}, mesh={self.mesh!r})"
-
-    def _listing(self) -> str:
-        kinds = {2: "surface", 3: "volume"}
-        return ", ".join(f"{n!r} ({kinds.get(d, f'dimension {d}')})" for n, d in sorted(self.dimensions.items()))
-
-    def _check(self, name, dimension: int | None = None) -> None:
-        if not isinstance(name, str):
-            raise TypeError(f"A physical group is named by a str, got {name!r}.")
-        if name not in self.dimensions:
-            raise ValueError(f"This mesh has no physical group named {name!r}; its groups are: "
-                             f"{self._listing() or 'none'}. Check the spelling, or name the group in gmsh "
-                             f"(Physical Surface(\"{name}\") = {{...}}; or Physical Volume) before meshing.")
-        if dimension is not None and self.dimensions[name] != dimension:
-            want = {2: "a physical surface (faces)", 3: "a physical volume (elements)"}[dimension]
-            raise ValueError(f"The physical group {name!r} has dimension {self.dimensions[name]}, but this needs "
-                             f"{want}; its groups are: {self._listing()}.")
 
     def elements(self, name: str) -> np.ndarray:
         """The element indices of the physical volume `name` (e.g. a passive region), sorted."""
@@ -105,11 +87,7 @@ def solid_groups_from_meshio(mesh, orientation: str = "refuse") -> PhysicalGroup
     """The [`PhysicalGroups`][] of a `meshio.Mesh` with gmsh physical groups (`field_data` names and
     `gmsh:physical` cell tags), on its solid mesh (`solid_from_meshio`)."""
     solid = solid_from_meshio(mesh, orientation)
-    field = getattr(mesh, "field_data", None) or {}
-    if not field or _TAG not in mesh.cell_data:
-        raise ValueError("This mesh holds no named physical groups (no field_data names or no 'gmsh:physical' cell "
-                         "tags): define them in gmsh (Physical Surface/Volume with a name) and write the mesh as a "
-                         ".msh file that keeps them (gmsh itself, or meshio with file_format='gmsh22').")
+    named = physical_names(mesh, "Physical Surface/Volume")
     points = np.asarray(mesh.points, dtype=np.float64)
     solid_type = next(b.type for b in mesh.cells if b.type in _SOLID_CELLS)
     # The solid mesh keeps the points some solid cell uses, in their order: map point index -> node index.
@@ -120,7 +98,7 @@ def solid_groups_from_meshio(mesh, orientation: str = "refuse") -> PhysicalGroup
     offset = 0
     for block, tags in zip(mesh.cells, mesh.cell_data[_TAG]):
         tags = np.asarray(tags).ravel()
-        for name, (tag, dim) in ((n, np.asarray(v).ravel()[:2]) for n, v in field.items()):
+        for name, tag, dim in named:
             rows = np.flatnonzero(tags == tag)
             if block.type == solid_type and dim == 3:
                 elements.setdefault(name, []).append(offset + rows)
@@ -133,8 +111,8 @@ def solid_groups_from_meshio(mesh, orientation: str = "refuse") -> PhysicalGroup
             dimensions[name] = int(dim)
         if block.type == solid_type:
             offset += len(block.data)
-    for name, (tag, dim) in ((n, np.asarray(v).ravel()[:2]) for n, v in field.items()):
-        dimensions.setdefault(name, int(dim))  # a named group without cells of this mesh: empty
+    for name, tag, dim in named:
+        dimensions.setdefault(name, dim)  # a named group without cells of this mesh: empty
     elements = {n: np.sort(np.concatenate(v)) for n, v in elements.items()}
     faces = {n: np.concatenate(v, axis=0) for n, v in faces.items()}
     face_nodes = {n: np.concatenate(v) for n, v in face_nodes.items()}
@@ -152,13 +130,5 @@ def read_solid_groups(path, orientation: str = "refuse") -> PhysicalGroups:
 
     **Returns:** a [`PhysicalGroups`][] (`.mesh` the [`SolidMesh`][], as [`read_solid_mesh`][] reads it).
     """
-    import meshio
-
-    if not pathlib.Path(path).is_file():
-        raise FileNotFoundError(f"read_solid_groups: no mesh file at {str(path)!r}.")
-    try:
-        mesh = meshio.read(path)
-    except (Exception, SystemExit) as err:  # meshio exits (SystemExit) on some unreadable files
-        raise ValueError(f"read_solid_groups: meshio could not read {str(path)!r} ({type(err).__name__}: {err}); "
-                         "give a gmsh .msh file with named physical groups.") from None
+    mesh = read_meshio(path, "read_solid_groups", "give a gmsh .msh file with named physical groups.")
     return solid_groups_from_meshio(mesh, orientation)
