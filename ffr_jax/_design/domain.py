@@ -111,8 +111,8 @@ class DesignDomain(eqx.Module):
         return cls(mesh, roles_from_masks(mesh.n_elements, solid, void))
 
     @classmethod
-    def from_groups(cls, groups: PlanarGroups, solid: tuple[str, ...] = (),
-                    void: tuple[str, ...] = ()) -> "DesignDomain":
+    def from_groups(cls, groups: PlanarGroups, solid: str | tuple[str, ...] = (),
+                    void: str | tuple[str, ...] = ()) -> "DesignDomain":
         """Passive regions by name: the elements of the physical surfaces `solid` (a name or a tuple of names) are
         passive solid, those of `void` passive void, the rest design (e.g. `solid=("rims",)` on a
         [`link_profile`][] or a [`read_planar_groups`][] part). An unknown name or a curve group is a `ValueError`
