@@ -60,12 +60,15 @@ def main():
                         default=pathlib.Path(__file__).parent / "results" / "time_to_design")
     parser.add_argument("--write-results", type=pathlib.Path, nargs=2, metavar=("COARSE", "FINE"), default=None,
                         help="only write the RESULTS.md subsection from two runs' summary.json")
+    parser.add_argument("--notes", type=pathlib.Path, default=None,
+                        help="with --write-results: a Markdown file whose text follows the table (the reading of it)")
     args = parser.parse_args()
     if args.write_results is not None:
         from _results import write_section
 
         coarse, fine = (json.loads((d / "summary.json").read_text()) for d in args.write_results)
-        write_section(SECTION, _section(coarse, fine))
+        notes = "" if args.notes is None else "\n" + args.notes.read_text()
+        write_section(SECTION, _section(coarse, fine) + notes)
         return
     run(args)
 
@@ -137,6 +140,9 @@ def run(args):
     psi_uniform = float(fj.objective(case, uniform, rtol=1e-10, atol=1e-12))
     evaluation_s = time.perf_counter() - start
 
+    # The optimiser's design thresholded at eta = 0.5 (0/1 by construction): how much of psi the grey part carried.
+    x_01 = np.where(x_phys > 0.5, 1.0, x_min)
+    psi_01 = float(fj.objective(case, x_01, rtol=1e-10, atol=1e-12))
     layout = np.asarray(case.design.element_densities(x_phys)).reshape(args.ny, args.nx)
     summary = {
         "mesh": f"{args.nx} x {args.ny}", "nx": args.nx, "ny": args.ny, "n_design": int(case.n_design),
@@ -151,6 +157,10 @@ def run(args):
         "psi_optimised": psi_opt, "psi_uniform": psi_uniform, "ratio": psi_opt / psi_uniform,
         "volume": float(x_phys.mean()), "grey_share": float(fj.grey_share(x_phys)), "back_offs": result.back_offs,
         "feasible": bool(result.feasible), "last_max_change": float(h.change[-1]),
+        "grey_on_edges": _grey_on_edges(layout), "psi_thresholded": psi_01,
+        "ratio_thresholded": psi_01 / float(fj.objective(case, case.initial_design(float(x_01.mean())), rtol=1e-10,
+                                                            atol=1e-12)),
+        "volume_thresholded": float(x_01.mean()),
         "final_evaluation_s": evaluation_s, "load_average": list(__import__("os").getloadavg()),
         "grey_history": [float(g) for g in h.grey], "psi_history": [float(v) for v in h.value],
         "change_history": [float(c) for c in h.change],
@@ -160,6 +170,13 @@ def run(args):
         summary["refinement"] = refinement_check(layout, coarse_layout)
         summary["refinement"]["coarse"] = str(args.coarse)
         _plot_refinement(layout, coarse_layout, grid).savefig(args.out / "refinement.png", dpi=150)
+    if args.resume and not len(calls) and (args.out / "summary.json").exists():
+        # Post-processed again without new steps: keep the timings of the process that ran the steps.
+        earlier_summary = json.loads((args.out / "summary.json").read_text())
+        for key in ("wall_time_s", "setup_s", "first_gradient_s", "later_gradients_s", "median_later_gradient_s",
+                    "optimizer_and_driver_s", "gradient_calls", "load_average"):
+            if key in earlier_summary:
+                summary[key] = earlier_summary[key]
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2))
     np.savez_compressed(args.out / "design.npz", x=np.asarray(result.x), x_phys=x_phys, layout=layout)
     ax = fj.plot_design(case, x_phys, title=f"reference rod {args.nx} x {args.ny}, MMA + continuation to beta "
@@ -170,6 +187,19 @@ def run(args):
     ax = fj.plot_history(h)
     ax.figure.savefig(args.out / "convergence.png", dpi=150)
     print(json.dumps({k: v for k, v in summary.items() if not k.endswith("history")}, indent=2))
+
+
+def _grey_on_edges(layout) -> float:
+    """The share of grey elements (0.1 < x < 0.9) that have a solid (>= 0.9) and a void (<= 0.1) element within
+    two elements: grey edges of members, against grey members (struts as thin as the filter) and grey regions."""
+    grey = (layout > 0.1) & (layout < 0.9)
+    if not grey.any():
+        return float("nan")
+    from scipy.ndimage import maximum_filter
+
+    near_solid = maximum_filter((layout >= 0.9).astype(float), size=5) > 0
+    near_void = maximum_filter((layout <= 0.1).astype(float), size=5) > 0
+    return float((grey & near_solid & near_void).sum() / grey.sum())
 
 
 def refinement_check(fine, coarse) -> dict:
@@ -241,7 +271,11 @@ def _section(c, f) -> str:
         row("MMA, constraints, projection, driver", lambda s: f"{s['optimizer_and_driver_s']:.0f} s"),
         row("psi / psi(uniform, same volume)", lambda s: f"{s['ratio']:.3f}"),
         row("volume fraction (bound 0.5)", lambda s: f"{s['volume']:.3f}"),
-        row("grey share (0.1 < x_phys < 0.9)", lambda s: f"**{100 * s['grey_share']:.2f} %**"),
+        row("grey share (0.1 < x_phys < 0.9)", lambda s: f"**{100 * s['grey_share']:.1f} %**"),
+        row("of the grey elements: on a member's edge (solid and void within 2 elements)",
+            lambda s: f"{100 * s['grey_on_edges']:.0f} %"),
+        row("thresholded at 0.5 (0/1): psi / psi(uniform), volume",
+            lambda s: f"{s['ratio_thresholded']:.3f}, {s['volume_thresholded']:.3f}"),
         row("largest change in the last step", lambda s: f"{s['last_max_change']:.3g}"),
         row("steps redone (back-offs), feasible", lambda s: f"{s['back_offs']}, {'yes' if s['feasible'] else 'no'}"),
         row("load average at the end (1/5/15 min)", lambda s: ", ".join(f"{v:.1f}" for v in s["load_average"])),
