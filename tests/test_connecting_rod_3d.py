@@ -88,7 +88,7 @@ def rods():
     return case(0.03), case(0.0)
 
 
-@pytest.mark.slow  # gmsh, the uniform body data and one compiled motion (about 40 s on one quiet core)
+@pytest.mark.slow  # gmsh, the uniform body data and one compiled motion (336 s at load 11-13; ~1 min quiet)
 def test_offset_crank_pin_excites_the_out_of_plane_modes(rods):
     from ffr_jax._app._solid_motion import solid_body_motion
     from ffr_jax._spatial._euler_parameters import rotation_matrix
@@ -113,8 +113,9 @@ def test_offset_crank_pin_excites_the_out_of_plane_modes(rods):
     assert ratios[1] < 1e-6, f"out-of-plane / in-plane modal coordinate with the pin in plane: {ratios[1]:.2e}"
     assert ratios[0] > 1e-2, f"out-of-plane / in-plane modal coordinate with the pin offset: {ratios[0]:.2e}"
     # The modes hold the big bore in x, y, z and the small one in y, z, so the chord A -> B is the rod frame's x-axis:
-    # its z-component is -e / |AB| = -e / l up to the axial stretch (q ~ 1e-6 relative; 1e-5 with margin).
-    np.testing.assert_allclose(tilts[0], -0.03 / 0.3, rtol=1e-5)
+    # its z-component is -e / |AB| = -e / l up to the elastic stretch of the chord (displacements of a few um on
+    # l = 0.3 m, ~1e-5 relative; 1e-3 bounds it with margin and still fails for a wrong tilt).
+    np.testing.assert_allclose(tilts[0], -0.03 / 0.3, rtol=1e-3)
     np.testing.assert_allclose(tilts[1], 0.0, atol=1e-12)
 
 

@@ -17,3 +17,8 @@ def test_notebook_runs_at_small_size(name):
 @pytest.mark.slow  # an adjoint compile and six MMA steps in a fresh kernel (minutes); issue 14's worked example
 def test_two_links_notebook_runs_at_small_size():
     run_notebook("two_links.ipynb")
+
+
+@pytest.mark.slow  # gmsh, the rod's body data, one compiled motion and the VTU series' motion (about a minute)
+def test_connecting_rod_3d_notebook_runs_at_small_size():
+    run_notebook("connecting_rod_3d.ipynb")

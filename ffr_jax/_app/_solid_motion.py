@@ -8,7 +8,6 @@ import numpy as np
 from .._dynamics._case import Case
 from .._dynamics._simulate import solve_minimal
 from .._spatial._euler_parameters import rotation_matrix
-from ._animation import designed_body_index
 
 
 def solid_body_motion(case: Case, x_phys, ts, *, rtol: float = 1e-8, atol: float = 1e-12):
@@ -34,7 +33,7 @@ def _solid_motion(case: Case, x_phys, ts, rtol: float, atol: float):
     modes = case.design.eigenpairs(x_phys)[1].reshape(n_nodes, 3, -1)
     trajectory = solve_minimal(problem.model, scene, problem.t0, problem.t1, problem.y0, problem.z0, ts=ts, rtol=rtol,
                                atol=atol, jump_ts=problem.jump_ts, dt0=problem.dt0)
-    offset = scene.offsets[designed_body_index(case)]
+    offset = scene.offsets[scene.body_index(case.design_map.name)]
     nodes = jnp.asarray(case.mesh.nodes)
 
     def place(y):

@@ -49,12 +49,13 @@ def write_vtu_series(path, case: Case, x_phys, *, frames: int = 60, rtol: float 
         raise ValueError(f"Write the VTU series as a .pvd collection (one .vtu per time beside it), got {path.name}.")
     if not (isinstance(frames, (int, np.integer)) and frames >= 2):
         raise ValueError(f"A time series needs a whole number of frames, at least 2, got frames={frames!r}.")
-    index = designed_body_index(case)
+    solid = isinstance(case.mesh, SolidMesh)
+    index = None if solid else designed_body_index(case)
     x_phys = np.asarray(case.design.check(jnp.asarray(x_phys, dtype=float)))
     ts = np.linspace(case.t0, case.t1, frames)
     mesh, domain = case.mesh, case.design.domain
     design = np.isin(np.arange(mesh.n_elements), np.asarray(domain.design_elements)).astype(float)
-    if isinstance(mesh, SolidMesh):
+    if solid:
         points, displacement = solid_body_motion(case, x_phys, ts, rtol=rtol, atol=atol)[:2]
         cells = [(mesh.cell_type, np.asarray(mesh.elements))]
         density = case.design.domain.element_densities(jnp.asarray(x_phys), case.design.material.x_min)
