@@ -109,7 +109,7 @@ def _segments_cross(a, b, c, d) -> bool:
     def side(p, q, r):
         return np.sign((q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]))
 
-    return side(a, b, c) * side(a, b, d) <= 0 and side(c, d, a) * side(c, d, b) <= 0
+    return bool(side(a, b, c) * side(a, b, d) <= 0 and side(c, d, a) * side(c, d, b) <= 0)
 
 
 def _rounded(vertices: np.ndarray, radii, what: str) -> list:

@@ -18,7 +18,7 @@ _HALVINGS = 8
 
 def jacobian_ratios(xy: np.ndarray) -> np.ndarray:
     """`min det J / max det J` over the corners of quadrilaterals `(..., 4, 2)`, `(...)` (negative when folded)."""
-    jac = _corner_jacobians(xy)
+    jac = _corner_jacobians(xy.reshape(-1, 4, 2)).reshape(xy.shape[:-1])  # it rolls along axis 1
     return jac.min(axis=-1) / np.maximum(jac.max(axis=-1), np.finfo(float).tiny)
 
 
@@ -43,18 +43,14 @@ def relocate_nodes(nodes: np.ndarray, elements: np.ndarray, movable: np.ndarray,
         for n in candidates:
             quads = elements[around[n]]
             at_n = quads == n
-            corners = nodes[quads]
-
-            def worst(point):
-                corners[at_n] = point
-                return jacobian_ratios(corners).min()
-
+            corners = np.broadcast_to(nodes[quads], (len(_DIRECTIONS),) + quads.shape + (2,)).copy()
             point = nodes[n].copy()
-            best = worst(point)
+            best = jacobian_ratios(nodes[quads]).min()
             step = 0.25 * np.mean(np.linalg.norm(nodes[quads] - point, axis=-1))
             for _ in range(_HALVINGS):
                 trials = point + step * _DIRECTIONS
-                values = np.array([worst(t) for t in trials])
+                corners[:, at_n] = trials[:, None]
+                values = jacobian_ratios(corners).min(axis=1)  # the worst element around n, for each trial
                 k = int(values.argmax())
                 if values[k] > best:
                     point, best, moved = trials[k], values[k], True
