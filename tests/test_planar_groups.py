@@ -140,12 +140,35 @@ def test_distortion_advice_names_an_argument_that_exists(tmp_path):
     meshio.write(path, _grid(points=points), file_format="gmsh22", binary=False)
     with pytest.raises(ValueError, match="badly distorted") as refused:
         fj.read_mesh(path)
-    knob = re.search(r"pass a lower (\w+) \(an argument of ([^)]*)\)", str(refused.value))
-    assert knob, str(refused.value)
-    for owner in re.split(r", | and ", knob.group(2)):
-        assert knob.group(1) in inspect.signature(getattr(fj, owner)).parameters, f"{owner} takes {knob.group(1)}"
+    name, owners = _named_knob(str(refused.value))
+    for owner in owners:
+        assert name in inspect.signature(getattr(fj, owner)).parameters, f"{owner} takes {name}"
     ratio = fj.QuadMesh(points[1:, :2], fj.from_meshio(_grid()).elements, min_jacobian_ratio=1e-3).jacobian_ratios()
     lower = 0.5 * ratio.min()
     assert fj.read_mesh(path, min_jacobian_ratio=lower).n_elements == 6
     assert fj.read_planar_groups(path, min_jacobian_ratio=lower).nodes("clamp") == (0, 1, 2)
     assert fj.from_meshio(meshio.read(path), min_jacobian_ratio=lower).n_elements == 6
+
+
+def _named_knob(message: str):
+    knob = re.search(r"pass a lower (\w+) \(an argument of ([^)]*)\)", message)
+    assert knob, message
+    return knob.group(1), re.split(r", | and ", knob.group(2))
+
+
+def test_solid_distortion_advice_names_an_argument_that_exists(tmp_path):
+    # A unit cube with one corner pulled 40 % towards the opposite one: valid, but refused at a ratio of 0.99.
+    cube = fj.box_grid(1, 1, 1, 1.0, 1.0, 1.0)
+    nodes = np.array(cube.nodes)
+    far, near = np.argmax(nodes.sum(axis=1)), np.argmin(nodes.sum(axis=1))
+    nodes[far] = 0.6 * nodes[far] + 0.4 * nodes[near]
+    with pytest.raises(ValueError, match="badly shaped") as refused:
+        fj.SolidMesh(nodes, cube.elements, min_jacobian_ratio=0.99)
+    name, owners = _named_knob(str(refused.value))
+    for owner in owners:
+        assert name in inspect.signature(getattr(fj, owner)).parameters, f"{owner} takes {name}"
+    path = tmp_path / "cube.vtu"
+    meshio.write(path, meshio.Mesh(nodes, [("hexahedron", np.asarray(cube.elements))]))
+    with pytest.raises(ValueError, match="badly shaped"):
+        fj.read_solid_mesh(path, min_jacobian_ratio=0.99)
+    assert fj.read_solid_mesh(path).n_elements == 1

@@ -83,10 +83,10 @@ class PhysicalGroups(NamedGroups):
         return tuple(int(n) for n in np.unique(self.mesh.elements[self._elements[name]]))
 
 
-def solid_groups_from_meshio(mesh, orientation: str = "refuse") -> PhysicalGroups:
+def solid_groups_from_meshio(mesh, orientation: str = "refuse", min_jacobian_ratio: float | None = None) -> PhysicalGroups:
     """The [`PhysicalGroups`][] of a `meshio.Mesh` with gmsh physical groups (`field_data` names and
-    `gmsh:physical` cell tags), on its solid mesh (`solid_from_meshio`)."""
-    solid = solid_from_meshio(mesh, orientation)
+    `gmsh:physical` cell tags), on its solid mesh (`solid_from_meshio`; `min_jacobian_ratio` passed to it)."""
+    solid = solid_from_meshio(mesh, orientation, min_jacobian_ratio)
     named = physical_names(mesh, "Physical Surface/Volume")
     points = np.asarray(mesh.points, dtype=np.float64)
     solid_type = next(b.type for b in mesh.cells if b.type in _SOLID_CELLS)
@@ -125,10 +125,10 @@ def solid_groups_from_meshio(mesh, orientation: str = "refuse") -> PhysicalGroup
     return PhysicalGroups(solid, dimensions, elements, faces, face_nodes)
 
 
-def read_solid_groups(path, orientation: str = "refuse") -> PhysicalGroups:
+def read_solid_groups(path, orientation: str = "refuse", min_jacobian_ratio: float | None = None) -> PhysicalGroups:
     """Read a gmsh mesh file with named physical groups: its solid mesh and its [`PhysicalGroups`][].
 
     **Returns:** a [`PhysicalGroups`][] (`.mesh` the [`SolidMesh`][], as [`read_solid_mesh`][] reads it).
     """
     mesh = read_meshio(path, "read_solid_groups", "give a gmsh .msh file with named physical groups.")
-    return solid_groups_from_meshio(mesh, orientation)
+    return solid_groups_from_meshio(mesh, orientation, min_jacobian_ratio)

@@ -10,13 +10,13 @@ and [`read_solid_mesh`][] take any solid mesh `meshio` reads (gmsh, VTU, Abaqus,
 """
 
 import hashlib
-import pathlib
 
 import numpy as np
 
 from .element.h8 import H8, gauss_points_2x2x2, trilinear
 from .element.solid_base import MIN_JACOBIAN_RATIO, AbstractSolidElement, _format_ids, jacobian_determinants
 from .element.tet10 import Tet10, conical_product_points, quadratic_tet
+from .named_groups import read_meshio
 
 # The element whose shape checks a mesh of each cell type runs (any element of that type would do:
 # the checks depend on the geometry only).
@@ -282,13 +282,14 @@ _SOLID_CELLS = {"hexahedron": 8, "tetra10": 10}
 _LOWER_DIMENSIONAL = ("vertex", "line", "line3", "triangle", "triangle6", "quad", "quad8", "quad9")
 
 
-def solid_from_meshio(mesh, orientation: str = "refuse") -> SolidMesh:
+def solid_from_meshio(mesh, orientation: str = "refuse", min_jacobian_ratio: float | None = None) -> SolidMesh:
     """A [`SolidMesh`][] from a `meshio.Mesh`: its `hexahedron` or `tetra10` cells.
 
     Lower-dimensional cells (vertices, lines, triangles and quadrilaterals: the boundary entities
     gmsh writes) are ignored and nodes used only by them are dropped. A mesh must hold one solid
     cell type; linear tetrahedra (`tetra`, which lock in bending), wedges, pyramids and quadratic
     hexahedra are refused with a clear error (gmsh: `Mesh.ElementOrder = 2` for `tetra10`).
+    `min_jacobian_ratio`: passed to the [`SolidMesh`][] (default its own, 0.05).
     """
     points = np.asarray(mesh.points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
@@ -304,7 +305,8 @@ def solid_from_meshio(mesh, orientation: str = "refuse") -> SolidMesh:
         raise ValueError(f"A solid mesh must hold exactly one of the cell types 'hexahedron', 'tetra10'; this one "
                          f"holds {solid or 'none'} (all types: {types}).")
     elements = np.concatenate([block.data for block in mesh.cells if block.type == solid[0]], axis=0)
-    return SolidMesh.without_unused_nodes(points, elements, orientation=orientation)[0]
+    quality = {} if min_jacobian_ratio is None else {"min_jacobian_ratio": min_jacobian_ratio}
+    return SolidMesh.without_unused_nodes(points, elements, orientation=orientation, **quality)[0]
 
 
 def solid_cell_data(mesh) -> dict[str, np.ndarray]:
@@ -320,18 +322,12 @@ def solid_cell_data(mesh) -> dict[str, np.ndarray]:
     return out
 
 
-def read_solid_mesh(path, orientation: str = "refuse") -> SolidMesh:
+def read_solid_mesh(path, orientation: str = "refuse", min_jacobian_ratio: float | None = None) -> SolidMesh:
     """Read a hexahedral or quadratic tetrahedral mesh from any file `meshio` reads (`.msh`, `.vtu`, `.inp`, ...).
 
-    See `solid_from_meshio` for what is supported.
+    See `solid_from_meshio` for what is supported; `min_jacobian_ratio` is passed to the [`SolidMesh`][] (default
+    its own, 0.05).
     """
-    import meshio
-
-    if not pathlib.Path(path).is_file():
-        raise FileNotFoundError(f"read_solid_mesh: no mesh file at {str(path)!r}.")
-    try:
-        mesh = meshio.read(path)
-    except (Exception, SystemExit) as err:  # meshio exits (SystemExit) on some unreadable files
-        raise ValueError(f"read_solid_mesh: meshio could not read {str(path)!r} ({type(err).__name__}: {err}); give "
-                         "a mesh file meshio reads (.msh, .vtu, .inp, ...) with its usual extension.") from None
-    return solid_from_meshio(mesh, orientation)
+    mesh = read_meshio(path, "read_solid_mesh", "give a mesh file meshio reads (.msh, .vtu, .inp, ...) with its "
+                       "usual extension.")
+    return solid_from_meshio(mesh, orientation, min_jacobian_ratio)

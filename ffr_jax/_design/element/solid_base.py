@@ -153,7 +153,8 @@ def check_jacobians(name: str, det: np.ndarray, size: np.ndarray, min_ratio: flo
     if bad.size:
         raise ValueError(
             f"{name} elements {_format_ids(bad)} are badly shaped (Jacobian ratio {ratio[bad].min():.3g} < "
-            f"{min_ratio}); remesh them, or lower min_jacobian_ratio if you accept the loss of accuracy."
+            f"{min_ratio}); remesh them, or pass a lower min_jacobian_ratio (an argument of SolidMesh, read_solid_mesh "
+            "and read_solid_groups) if you accept the loss of accuracy."
         )
 
 
