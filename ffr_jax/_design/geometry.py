@@ -147,7 +147,8 @@ def link_with_holes(length: float = 0.2, width: float = 0.05, hole_radius: float
         for _, surface in gmsh.model.getEntities(2):
             types, _, node_tags = gmsh.model.mesh.getElements(2, surface)
             if any(t != 3 for t in types):
-                raise RuntimeError("gmsh left non-quadrilateral elements; refine mesh_size.")
+                raise RuntimeError("gmsh left non-quadrilateral elements; refine mesh_size, or mesh the link with "
+                                   "fj.link_profile (an all-quadrilateral recipe).")
             quads = index[np.asarray(node_tags[0], dtype=np.int64)].reshape(-1, 4)
             centre = np.asarray(occ.getCenterOfMass(2, surface))[:2]
             is_rim = np.min(np.linalg.norm(centres - centre, axis=1)) < 1e-9 * length

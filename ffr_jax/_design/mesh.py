@@ -383,7 +383,8 @@ def from_meshio(mesh, min_jacobian_ratio: float | None = None) -> QuadMesh:
         raise ValueError(
             f"Unsupported cell types {bad}: only 4-node quadrilaterals ('quad') are supported (lines and "
             "vertices are ignored). Recombine the mesh to linear quadrilaterals (gmsh: Mesh.RecombineAll = 1, "
-            "Mesh.ElementOrder = 1; or Mesh.SubdivisionAlgorithm = 1 for an all-quad mesh)."
+            "Mesh.ElementOrder = 1; or Mesh.SubdivisionAlgorithm = 1 for an all-quad mesh), or mesh the part with "
+            "fj.link_profile."
         )
     quads = [block.data for block in mesh.cells if block.type == "quad"]
     if not quads:
