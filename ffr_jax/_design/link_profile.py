@@ -11,7 +11,7 @@ recombination, `Mesh.RecombinationAlgorithm` 2 or 3, leaves triangles or fails w
    element a quadrilateral, whatever the parity of the boundary;
 3. a guarded relocation of the inner nodes (`quad_relocation`) that raises the worst corner-Jacobian ratios.
 
-gmsh is imported only inside [`link_profile`][], so the package imports without it.
+gmsh is imported only inside [`link_profile`][ffr_jax.link_profile], so the package imports without it.
 """
 
 import dataclasses
@@ -28,7 +28,7 @@ _ARC_POINTS = 24  # sample points per quarter turn in the geometry checks (chord
 
 
 class Hole(NamedTuple):
-    """A circular pin hole (a bore) of [`link_profile`][].
+    """A circular pin hole (a bore) of [`link_profile`][ffr_jax.link_profile].
 
     - `centre`: `(x, y)`; `radius`: the bore's radius.
     - `rim`: width of the passive solid ring around it (0: no ring, the bore cuts the design region).
@@ -42,7 +42,7 @@ class Hole(NamedTuple):
 
 
 class Slot(NamedTuple):
-    """A slot (a lightening hole) of [`link_profile`][]: a rectangle with rounded corners.
+    """A slot (a lightening hole) of [`link_profile`][ffr_jax.link_profile]: a rectangle with rounded corners.
 
     - `centre`: `(x, y)`; `length`, `width`: its overall size along and across its axis.
     - `corner_radius`: radius of its corners; `None` (default) is `width / 2`, fully rounded ends.
@@ -58,7 +58,7 @@ class Slot(NamedTuple):
 
 @dataclasses.dataclass(frozen=True)
 class QuadMeshing:
-    """Options of [`link_profile`][]'s quadrilateral meshing (the defaults are the tested recipe).
+    """Options of [`link_profile`][ffr_jax.link_profile]'s quadrilateral meshing (the defaults are the tested recipe).
 
     - `algorithm`: gmsh's `Mesh.Algorithm` for the triangles before recombination (6: Frontal-Delaunay).
     - `circle_points`: elements per full turn of a circle or arc at least (`Mesh.MinimumCirclePoints`, before

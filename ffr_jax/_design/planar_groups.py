@@ -25,7 +25,7 @@ def boundary_edges(mesh: QuadMesh) -> np.ndarray:
 
 class PlanarGroups(NamedGroups):
     """The physical groups of a planar quadrilateral mesh, by name (see the module docstring). Build it with
-    [`read_planar_groups`][], [`planar_groups_from_meshio`][] or [`link_profile`][].
+    [`read_planar_groups`][], [`planar_groups_from_meshio`][] or [`link_profile`][ffr_jax.link_profile].
 
     **Attributes:** `mesh`, the [`QuadMesh`][]; `dimensions`, `{name: 0 (point), 1 (curve) or 2 (surface)}`.
 
