@@ -166,3 +166,22 @@ def test_relocation_raises_the_worst_element_and_keeps_fixed_nodes():
     moved = relocate_nodes(nodes, elements, movable, target=1.0, passes=4)
     np.testing.assert_array_equal(moved[~movable], nodes[~movable], err_msg="fixed nodes stay")
     assert before < 0.5 and jacobian_ratios(moved[elements]).min() >= 0.95
+
+
+@pytest.mark.slow
+def test_the_part_goes_into_a_slider_crank_by_names(rod):
+    # The docs' recipe: design domain, clamped set, interface and markers from the group names, no node search.
+    # Each bore's nodes sit at equal angle steps on four quarter arcs (gmsh's uniform parametrisation, halved by
+    # the subdivision), a set symmetric under quarter turns about the centre: their centroid, the marker, is the
+    # pin centre up to rounding (sums of ~30 coordinates below 0.3 m: ~1e-15 m; 1e-9 m bounds it).
+    groups, _ = rod
+    a, b = groups.nodes("bore_A"), groups.nodes("bore_B")
+    body = fj.DesignedBody(fj.FEModel(groups.mesh, fj.QM6(), thickness=0.005, poisson=0.3),
+                           fj.DesignDomain.from_groups(groups, solid="rims"), fj.SIMP(),
+                           fj.ModalReduction(2, fj.Clamped(a), interfaces=(fj.Interface(b, rigid=True),)),
+                           markers=(a, b))
+    case = fj.cases.slider_crank(rod=body, t1=0.02)
+    assert case.n_design == groups.mask("design").sum()
+    data = case.scene_template.bodies[-1].data
+    np.testing.assert_allclose(data.marker_positions, [(0.0, 0.0), (L, 0.0)], rtol=0, atol=1e-9,
+                               err_msg="markers at the pin centres")
