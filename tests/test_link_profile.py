@@ -40,6 +40,14 @@ SHAPES = {
                        holes=[fj.Hole((0, 0), 0.008, 0.005), fj.Hole((0.2, 0), 0.006, 0.004),
                               fj.Hole((0.1, 0.13), 0.005, 0.0)],
                        slots=[fj.Slot((0.1, 0.03), 0.06, 0.02, angle=0.3)], fillet=0.015),
+    # A dog-bone crank: a big and a small end joined by a narrow web, reflex (inward) corners with fillets of
+    # 5 to 20 mm, a narrow slot in the web.
+    "dog_bone": dict(outline=[(-0.03, -0.03), (0.03, -0.03), (0.05, -0.012), (0.16, -0.012), (0.175, -0.02),
+                              (0.22, -0.02), (0.22, 0.02), (0.175, 0.02), (0.16, 0.012), (0.05, 0.012), (0.03, 0.03),
+                              (-0.03, 0.03)],
+                     holes=[fj.Hole((0, 0), 0.012, 0.006), fj.Hole((0.2, 0), 0.006, 0.004)],
+                     slots=[fj.Slot((0.105, 0), 0.07, 0.008)],
+                     fillet=[0.02, 0.02, 0.01, 0.01, 0.005, 0.012, 0.012, 0.005, 0.01, 0.01, 0.02, 0.02]),
 }
 COARSE = 0.004
 

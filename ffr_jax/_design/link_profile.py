@@ -61,8 +61,9 @@ class QuadMeshing:
     """Options of [`link_profile`][ffr_jax.link_profile]'s quadrilateral meshing (the defaults are the tested recipe).
 
     - `algorithm`: gmsh's `Mesh.Algorithm` for the triangles before recombination (6: Frontal-Delaunay).
-    - `circle_points`: elements per full turn of a circle or arc at least (`Mesh.MinimumCirclePoints`, before
-      the split into quadrilaterals, which doubles it).
+    - `circle_points`: elements around each bore and rim circle at least, before the split into quadrilaterals,
+      which doubles it (the element size at the circles' points; the fillets keep the target size, so that a
+      small fillet does not crowd small elements into a corner).
     - `target_ratio`, `passes`: the node relocation raises elements below this corner-Jacobian ratio, in at most
       `passes` sweeps (0: off).
     - `min_jacobian_ratio`: the mesh is refused below this ratio (see [`QuadMesh`][]), with the advice to
@@ -266,11 +267,13 @@ def _mesh(outline: list, holes: tuple, slots: list, mesh_size: float, meshing: Q
         gmsh.model.add("ffr_jax_link_profile")
         geo, points = gmsh.model.geo, {}
         outer, outline_curves = _loop(geo, outline, points)
-        cutouts, rim_surfaces, bores, slot_curves = [], [], {}, []
+        cutouts, rim_surfaces, bores, slot_curves, circles = [], [], {}, [], []
         for h in holes:
             bore, bores[h.name] = _loop(geo, _circle(h.centre, h.radius), points)
+            circles.append((h.radius, bores[h.name]))
             if h.rim > 0:
-                ring, _ = _loop(geo, _circle(h.centre, h.radius + h.rim), points)
+                ring, ring_curves = _loop(geo, _circle(h.centre, h.radius + h.rim), points)
+                circles.append((h.radius + h.rim, ring_curves))
                 rim_surfaces.append(geo.addPlaneSurface([ring, bore]))
                 cutouts.append(ring)
             else:
@@ -281,14 +284,16 @@ def _mesh(outline: list, holes: tuple, slots: list, mesh_size: float, meshing: Q
             slot_curves += curves
         design = geo.addPlaneSurface([outer, *cutouts])
         geo.synchronize()
+        for radius, curves in circles:
+            ends = gmsh.model.getBoundary([(1, c) for c in curves], combined=False, oriented=False)
+            gmsh.model.mesh.setSize(ends, min(2 * mesh_size, 2 * np.pi * radius / meshing.circle_points))
         groups = [(2, [design], "design"), (1, outline_curves, "outline")]
         groups += [(2, rim_surfaces, "rims")] if rim_surfaces else []
         groups += [(1, slot_curves, "slots")] if slot_curves else []
         groups += [(1, curves, f"bore_{name}") for name, curves in bores.items()]
         for dim, tags, name in groups:
             gmsh.model.addPhysicalGroup(dim, tags, name=name)
-        for key, value in (("Mesh.MeshSizeMax", 2 * mesh_size), ("Mesh.MeshSizeMin", mesh_size),
-                           ("Mesh.MinimumCirclePoints", meshing.circle_points),
+        for key, value in (("Mesh.MeshSizeMax", 2 * mesh_size),
                            ("Mesh.Algorithm", meshing.algorithm), ("Mesh.RecombineAll", 1),
                            ("Mesh.RecombinationAlgorithm", 1), ("Mesh.SubdivisionAlgorithm", 1),
                            ("Mesh.Smoothing", 10), ("Mesh.ElementOrder", 1), ("General.NumThreads", 1)):
