@@ -86,3 +86,31 @@ def masks_by_name(groups, n_elements: int, solid=(), void=()) -> dict[str, np.nd
             mask[groups.elements(name)] = True
         masks[label] = mask
     return masks
+
+
+def point_renumbering(mesh, cell_type: str) -> np.ndarray:
+    """Point index -> node index `(n_points,)` of the mesh a reader builds from the `cell_type` cells of a
+    `meshio.Mesh` (the points those cells use, in their order; -1 for the others)."""
+    used = np.unique(np.concatenate([np.asarray(b.data).ravel() for b in mesh.cells if b.type == cell_type]))
+    renumber = np.full(np.asarray(mesh.points).shape[0], -1, dtype=np.int64)
+    renumber[used] = np.arange(used.size)
+    return renumber
+
+
+def tagged_cells(mesh, named, cell_type: str):
+    """For each cell block of a `meshio.Mesh` and each named group `(name, tag, dimension)` of `named`: `(name,
+    dimension, block type, the block's cells in the group, their indices among all cells of `cell_type`)`."""
+    offset = 0
+    for block, tags in zip(mesh.cells, mesh.cell_data[TAG]):
+        tags, data = np.asarray(tags).ravel(), np.asarray(block.data)
+        for name, tag, dim in named:
+            rows = np.flatnonzero(tags == tag)
+            yield name, dim, block.type, data[rows], offset + rows
+        if block.type == cell_type:
+            offset += len(data)
+
+
+def collected(parts: dict, names, join, empty) -> dict:
+    """`{name: join(parts[name])}` for each of `names`, `empty` for a name without parts (a named group without
+    cells of this mesh)."""
+    return {name: join(parts[name]) if name in parts else empty for name in names}

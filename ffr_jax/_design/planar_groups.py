@@ -11,7 +11,7 @@ dimension and a curve off the mesh's boundary are `ValueError`s naming the group
 import numpy as np
 
 from .mesh import QuadMesh, _format_ids, from_meshio
-from .named_groups import TAG, NamedGroups, physical_names, read_meshio
+from .named_groups import NamedGroups, collected, physical_names, point_renumbering, read_meshio, tagged_cells
 
 _LINES = ("line", "line3")
 
@@ -100,38 +100,26 @@ def planar_groups_from_meshio(mesh, min_jacobian_ratio: float | None = None) -> 
     if volumes:
         raise ValueError(f"The physical groups {volumes} are volumes: a planar mesh has surfaces, curves and points; "
                          "read a solid part with read_solid_groups.")
-    used = np.unique(np.concatenate([b.data.ravel() for b in mesh.cells if b.type == "quad"]))
-    renumber = np.full(np.asarray(mesh.points).shape[0], -1, dtype=np.int64)
-    renumber[used] = np.arange(used.size)  # as from_meshio: the points some quad uses, in their order
+    renumber = point_renumbering(mesh, "quad")  # as from_meshio: the points some quad uses, in their order
     elements, edges, points = {}, {}, {}
-    offset = 0
-    for block, tags in zip(mesh.cells, mesh.cell_data[TAG]):
-        tags, data = np.asarray(tags).ravel(), np.asarray(block.data)
-        for name, tag, dim in named:
-            rows = np.flatnonzero(tags == tag)
-            if block.type == "quad" and dim == 2:
-                elements.setdefault(name, []).append(offset + rows)
-            elif block.type in _LINES and dim == 1:
-                edges.setdefault(name, []).append(renumber[data[rows][:, :2]])
-            elif block.type == "vertex" and dim == 0:
-                points.setdefault(name, []).append(renumber[data[rows].ravel()])
-        if block.type == "quad":
-            offset += len(data)
-    elements = {n: np.sort(np.concatenate(v)) for n, v in elements.items()}
-    edges = {n: np.concatenate(v, axis=0) for n, v in edges.items()}
-    points = {n: np.concatenate(v) for n, v in points.items()}
+    for name, dim, kind, cells, rows in tagged_cells(mesh, named, "quad"):
+        if kind == "quad" and dim == 2:
+            elements.setdefault(name, []).append(rows)
+        elif kind in _LINES and dim == 1:
+            edges.setdefault(name, []).append(renumber[cells[:, :2]])
+        elif kind == "vertex" and dim == 0:
+            points.setdefault(name, []).append(renumber[cells.ravel()])
+    dimensions = {name: dim for name, _, dim in named}
+    empty = np.zeros(0, dtype=np.int64)
+    elements = collected(elements, [n for n, d in dimensions.items() if d == 2],
+                         lambda v: np.sort(np.concatenate(v)), empty)
+    edges = collected(edges, [n for n, d in dimensions.items() if d == 1], lambda v: np.concatenate(v, axis=0),
+                      np.zeros((0, 2), np.int64))
+    points = collected(points, [n for n, d in dimensions.items() if d == 0], np.concatenate, empty)
     for name, found in (*edges.items(), *points.items()):
         if np.any(found < 0):
             raise ValueError(f"The physical group {name!r} holds nodes that no quadrilateral uses (a curve or point "
                              "off the meshed surfaces): put only curves and points of the meshed part in it.")
-    dimensions = {name: dim for name, _, dim in named}
-    for name, dim in dimensions.items():  # a named group without cells of this mesh: empty
-        if dim == 2:
-            elements.setdefault(name, np.zeros(0, dtype=np.int64))
-        elif dim == 1:
-            edges.setdefault(name, np.zeros((0, 2), dtype=np.int64))
-        else:
-            points.setdefault(name, np.zeros(0, dtype=np.int64))
     return PlanarGroups(quad_mesh, dimensions, elements, edges, points)
 
 

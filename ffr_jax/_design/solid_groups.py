@@ -12,7 +12,7 @@ no searching of nodes by distance. Unknown names, a group of the wrong dimension
 import numpy as np
 
 from .element.solid_base import _format_ids
-from .named_groups import TAG as _TAG, NamedGroups, physical_names, read_meshio
+from .named_groups import NamedGroups, collected, physical_names, point_renumbering, read_meshio, tagged_cells
 from .solid_mesh import SolidMesh, _SOLID_CELLS, solid_from_meshio
 
 # Corner-node faces of each solid cell (VTK/meshio node order): a face is the sorted tuple of its corners.
@@ -88,41 +88,23 @@ def solid_groups_from_meshio(mesh, orientation: str = "refuse", min_jacobian_rat
     `gmsh:physical` cell tags), on its solid mesh (`solid_from_meshio`; `min_jacobian_ratio` passed to it)."""
     solid = solid_from_meshio(mesh, orientation, min_jacobian_ratio)
     named = physical_names(mesh, "Physical Surface/Volume")
-    points = np.asarray(mesh.points, dtype=np.float64)
     solid_type = next(b.type for b in mesh.cells if b.type in _SOLID_CELLS)
-    # The solid mesh keeps the points some solid cell uses, in their order: map point index -> node index.
-    used = np.unique(np.concatenate([b.data.ravel() for b in mesh.cells if b.type == solid_type]))
-    renumber = np.full(points.shape[0], -1, dtype=np.int64)
-    renumber[used] = np.arange(used.size)
-    dimensions, elements, faces, face_nodes = {}, {}, {}, {}
-    offset = 0
-    for block, tags in zip(mesh.cells, mesh.cell_data[_TAG]):
-        tags = np.asarray(tags).ravel()
-        for name, tag, dim in named:
-            rows = np.flatnonzero(tags == tag)
-            if block.type == solid_type and dim == 3:
-                elements.setdefault(name, []).append(offset + rows)
-            elif block.type in _FACE_CORNERS and dim == 2:
-                corners = renumber[np.asarray(block.data)[rows][:, :_FACE_CORNERS[block.type]]]
-                faces.setdefault(name, []).append(corners)
-                face_nodes.setdefault(name, []).append(renumber[np.asarray(block.data)[rows]].ravel())
-            else:
-                continue
-            dimensions[name] = int(dim)
-        if block.type == solid_type:
-            offset += len(block.data)
-    for name, tag, dim in named:
-        dimensions.setdefault(name, dim)  # a named group without cells of this mesh: empty
-    elements = {n: np.sort(np.concatenate(v)) for n, v in elements.items()}
-    faces = {n: np.concatenate(v, axis=0) for n, v in faces.items()}
-    face_nodes = {n: np.concatenate(v) for n, v in face_nodes.items()}
-    for name, dim in dimensions.items():
-        if dim == 3:
-            elements.setdefault(name, np.zeros(0, dtype=np.int64))
-        elif dim == 2:
-            faces.setdefault(name, np.zeros((0, 3), dtype=np.int64))
-            face_nodes.setdefault(name, np.zeros(0, dtype=np.int64))
-    return PhysicalGroups(solid, dimensions, elements, faces, face_nodes)
+    renumber = point_renumbering(mesh, solid_type)
+    elements, faces, face_nodes = {}, {}, {}
+    for name, dim, kind, cells, rows in tagged_cells(mesh, named, solid_type):
+        if kind == solid_type and dim == 3:
+            elements.setdefault(name, []).append(rows)
+        elif kind in _FACE_CORNERS and dim == 2:
+            faces.setdefault(name, []).append(renumber[cells[:, :_FACE_CORNERS[kind]]])
+            face_nodes.setdefault(name, []).append(renumber[cells].ravel())
+    dimensions = {name: dim for name, _, dim in named}
+    volumes = [n for n, d in dimensions.items() if d == 3]
+    surfaces = [n for n, d in dimensions.items() if d == 2]
+    empty = np.zeros(0, dtype=np.int64)
+    return PhysicalGroups(solid, dimensions,
+                          collected(elements, volumes, lambda v: np.sort(np.concatenate(v)), empty),
+                          collected(faces, surfaces, lambda v: np.concatenate(v, axis=0), np.zeros((0, 3), np.int64)),
+                          collected(face_nodes, surfaces, np.concatenate, empty))
 
 
 def read_solid_groups(path, orientation: str = "refuse", min_jacobian_ratio: float | None = None) -> PhysicalGroups:
