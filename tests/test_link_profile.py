@@ -138,6 +138,7 @@ def test_the_file_holds_the_same_mesh_and_groups(rod, tmp_path):
     ({"holes": []}, "at least one Hole"),
     ({"slots": [fj.Slot((L / 2, 0), 0.12, 0.014, corner_radius=0.01)]}, r"corner_radius must lie in \[0, width / 2\]"),
     ({"mesh_size": 0.0}, "mesh_size must be a positive"),
+    ({"fillet": [0.01, 0.01]}, "one per corner"),
     ({"meshing": fj.QuadMeshing}, "QuadMeshing"),
 ])
 def test_bad_shapes_are_refused_before_meshing(change, match, monkeypatch):
@@ -193,3 +194,31 @@ def test_the_part_goes_into_a_slider_crank_by_names(rod):
     data = case.scene_template.bodies[-1].data
     np.testing.assert_allclose(data.marker_positions, [(0.0, 0.0), (L, 0.0)], rtol=0, atol=1e-9,
                                err_msg="markers at the pin centres")
+
+
+def test_a_clockwise_outline_is_the_same_part(monkeypatch):
+    # Corners given clockwise with their fillets in the same order describe the same part: the recipe meshes the
+    # same pieces (lines and arcs, as sets of end points and centres) as for the counter-clockwise order.
+    import ffr_jax._design.link_profile as recipe
+
+    class Captured(Exception):
+        pass
+
+    seen = []
+
+    def capture(outline, *args):
+        seen.append(outline)
+        raise Captured
+
+    monkeypatch.setattr(recipe, "_mesh", capture)
+    shape = {**SHAPES["dog_bone"], "fillet": [0.02, 0.015, 0.01, 0.008, 0.005, 0.012, 0.01, 0.004, 0.01, 0.006,
+                                              0.02, 0.018]}  # a different radius at each corner
+    for order in (slice(None), slice(None, None, -1)):
+        with pytest.raises(Captured):
+            fj.link_profile(**{**shape, "outline": shape["outline"][order], "fillet": shape["fillet"][order]},
+                            mesh_size=COARSE)
+
+    def pieces(outline):
+        return {(p[0], *(tuple(np.round(q, 12)) for q in p[1:])) for p in outline}
+
+    assert len(seen) == 2 and pieces(seen[0]) == pieces(seen[1])

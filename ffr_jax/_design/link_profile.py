@@ -90,7 +90,8 @@ class QuadMeshing:
 
 
 # --- geometry --------------------------------------------------------------------------------------------------
-def _polygon(vertices, what: str) -> np.ndarray:
+def _polygon(vertices, what: str) -> tuple[np.ndarray, bool]:
+    """The vertices `(n, 2)` checked, and whether they run clockwise."""
     v = np.asarray(vertices, dtype=np.float64)
     if v.ndim != 2 or v.shape[1] != 2 or v.shape[0] < 3 or not np.all(np.isfinite(v)):
         raise ValueError(f"The {what} must be (n, 2) finite vertex coordinates with n >= 3, got shape {v.shape}.")
@@ -103,7 +104,7 @@ def _polygon(vertices, what: str) -> np.ndarray:
             if _segments_cross(v[i], v[(i + 1) % n], v[j], v[(j + 1) % n]):
                 raise ValueError(f"The {what} crosses itself (edges {i} and {j}); give its corners in order around it.")
     area = 0.5 * np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])
-    return v if area > 0 else v[::-1]
+    return v, bool(area < 0)
 
 
 def _segments_cross(a, b, c, d) -> bool:
@@ -256,7 +257,10 @@ def _loop(geo, pieces: list, points: dict) -> tuple[int, list[int]]:
 
 def _mesh(outline: list, holes: tuple, slots: list, mesh_size: float, meshing: QuadMeshing):
     """Mesh with gmsh: `(meshio.Mesh with physical groups, movable nodes)`."""
-    import gmsh
+    try:
+        import gmsh
+    except ImportError:
+        raise ImportError("link_profile meshes with gmsh: install it (pip install gmsh).") from None
     import meshio
 
     initialised = gmsh.isInitialized()
@@ -360,7 +364,12 @@ def link_profile(outline, holes, slots=(), *, fillet=0.0, mesh_size: float, mesh
         raise ValueError(f"mesh_size must be a positive number, got {mesh_size!r}.")
     if not isinstance(meshing, QuadMeshing):
         raise TypeError(f"meshing must be a QuadMeshing, got {type(meshing).__name__}.")
-    outline = _rounded(_polygon(outline, "outline"), fillet, "outline")
+    corners, clockwise = _polygon(outline, "outline")
+    fillet = np.asarray(fillet, dtype=np.float64)
+    if fillet.shape not in ((), (len(corners),)):
+        raise ValueError(f"fillet must be one radius or one per corner ({len(corners)}), got shape {fillet.shape}.")
+    fillet = np.broadcast_to(fillet, (len(corners),))
+    outline = _rounded(corners[::-1], fillet[::-1], "outline") if clockwise else _rounded(corners, fillet, "outline")
     holes = _holes(holes, float(mesh_size))
     slots = [_slot_pieces(s if isinstance(s, Slot) else Slot(*s)) for s in slots]
     _check_layout(outline, holes, slots, float(mesh_size))
