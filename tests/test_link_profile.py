@@ -7,6 +7,10 @@ elements outside, each bore's nodes on its circle, and the mesh's boundary exact
 and "bore_*". The default run meshes each shape at one coarse size (well under a second each); the finer sizes are
 marked slow (and the bell crank, the largest part)."""
 
+import dataclasses
+import inspect
+import re
+
 import numpy as np
 import pytest
 
@@ -222,3 +226,14 @@ def test_a_clockwise_outline_is_the_same_part(monkeypatch):
         return {(p[0], *(tuple(np.round(q, 12)) for q in p[1:])) for p in outline}
 
     assert len(seen) == 2 and pieces(seen[0]) == pieces(seen[1])
+
+
+def test_a_mesh_below_the_quality_bound_is_refused_with_knobs_that_exist():
+    # Without relocation and with a bound of 0.9 (near-parallelograms only) the recipe's mesh is refused; the
+    # message names QuadMeshing fields and link_profile's mesh_size, each of which exists.
+    with pytest.raises(ValueError, match="below 0.9") as refused:
+        fj.link_profile(**SHAPES["stadium"], mesh_size=COARSE, meshing=fj.QuadMeshing(passes=0, min_jacobian_ratio=0.9))
+    message = str(refused.value)
+    fields = set(re.findall(r"QuadMeshing\((\w+)=", message))
+    assert fields and fields <= {f.name for f in dataclasses.fields(fj.QuadMeshing)}, message
+    assert "mesh_size" in message and "mesh_size" in inspect.signature(fj.link_profile).parameters

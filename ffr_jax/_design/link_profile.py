@@ -1,9 +1,9 @@
 """A planar part meshed in quadrilaterals with gmsh: an outline with filleted corners, pin holes with passive rims,
 slots with rounded ends or corners, and named physical groups.
 
-The recipe (the settings that mesh every shape of tests/test_link_profile.py's sweep, where full-quad Blossom
-recombination, `Mesh.RecombinationAlgorithm` 2 or 3, leaves triangles or fails with "1D mesh cannot be divided by
-2" on rounded slots, and gives corner-Jacobian ratios down to 0.03):
+The recipe (the settings that mesh every shape of tests/test_link_profile.py's sweep; with gmsh 4.15, full-quad
+Blossom recombination, `Mesh.RecombinationAlgorithm` 2 or 3, left triangles on such parts or failed with "1D mesh
+cannot be divided by 2" on rounded slots, and gave corner-Jacobian ratios down to 0.03):
 1. the geometry from lines and arcs (gmsh's built-in kernel, no Boolean operations): the rim's outer circle is
    the curve shared by the rim and the design region, so the rim is a surface of its own;
 2. Frontal-Delaunay triangles (`Mesh.Algorithm` 6) of twice the target size, recombined (Blossom,
@@ -22,7 +22,7 @@ import numpy as np
 
 from .mesh import _corner_jacobians
 from .planar_groups import PlanarGroups, planar_groups_from_meshio
-from .quad_relocation import relocate_nodes
+from .quad_relocation import jacobian_ratios, relocate_nodes
 
 _ARC_POINTS = 24  # sample points per quarter turn in the geometry checks (chord error 0.2 % of the radius)
 
@@ -364,6 +364,8 @@ def link_profile(outline, holes, slots=(), *, fillet=0.0, mesh_size: float, mesh
         raise ValueError(f"mesh_size must be a positive number, got {mesh_size!r}.")
     if not isinstance(meshing, QuadMeshing):
         raise TypeError(f"meshing must be a QuadMeshing, got {type(meshing).__name__}.")
+    if path is not None and pathlib.Path(path).suffix != ".msh":
+        raise ValueError(f"path must name a .msh file (gmsh 2.2 keeps the physical groups), got {str(path)!r}.")
     corners, clockwise = _polygon(outline, "outline")
     fillet = np.asarray(fillet, dtype=np.float64)
     if fillet.shape not in ((), (len(corners),)):
@@ -380,12 +382,17 @@ def link_profile(outline, holes, slots=(), *, fillet=0.0, mesh_size: float, mesh
     elements[clockwise] = elements[clockwise][:, ::-1]
     if meshing.passes:
         mesh.points[:, :2] = relocate_nodes(xy, elements, movable, meshing.target_ratio, meshing.passes)
+    ratios = jacobian_ratios(mesh.points[:, :2][elements])
+    if ratios.min() < meshing.min_jacobian_ratio:
+        worst = mesh.points[elements[ratios.argmin()], :2].mean(axis=0)
+        raise ValueError(f"link_profile: {np.count_nonzero(ratios < meshing.min_jacobian_ratio)} elements have a "
+                         f"corner-Jacobian ratio below {meshing.min_jacobian_ratio} (worst {ratios.min():.3g}, near "
+                         f"({worst[0]:.4g}, {worst[1]:.4g})); give a smaller mesh_size, more relocation passes "
+                         "(QuadMeshing(passes=...)), or a lower QuadMeshing(min_jacobian_ratio=...) if you accept the "
+                         "loss of accuracy.")
     groups = planar_groups_from_meshio(mesh, meshing.min_jacobian_ratio)
     if path is not None:
         import meshio
 
-        path = pathlib.Path(path)
-        if path.suffix != ".msh":
-            raise ValueError(f"path must name a .msh file (gmsh 2.2 keeps the physical groups), got {str(path)!r}.")
         meshio.write(path, mesh, file_format="gmsh22", binary=False)
     return groups
