@@ -172,3 +172,18 @@ def test_solid_distortion_advice_names_an_argument_that_exists(tmp_path):
     with pytest.raises(ValueError, match="badly shaped"):
         fj.read_solid_mesh(path, min_jacobian_ratio=0.99)
     assert fj.read_solid_mesh(path).n_elements == 1
+
+
+def test_groups_sharing_entities_are_errors_not_silent_gaps():
+    # gmsh 4.1 files carry one physical tag per element (meshio keeps the first): a second group of the same
+    # surface reads empty. gmsh 2.2 files repeat the element once per group: the mesh repeats quadrilaterals.
+    shadowed = fj.planar_groups_from_meshio(_grid(extra_fields={"again": np.array([9, 2]), "edge": np.array([10, 1])}))
+    for method in ("elements", "nodes"):
+        with pytest.raises(ValueError, match="'again' has no cells in this mesh.*one physical group"):
+            getattr(shadowed, method)("again")
+    with pytest.raises(ValueError, match="'edge' has no cells"):
+        shadowed.nodes("edge")
+    mesh = _grid()
+    copy = (("quad", mesh.cells[0].data[:2]), np.full(2, 9))
+    with pytest.raises(ValueError, match="repeats 2 quadrilaterals.*one physical group"):
+        fj.planar_groups_from_meshio(_grid(extra_cells=[copy], extra_fields={"again": np.array([9, 2])}))

@@ -44,6 +44,15 @@ class NamedGroups:
             raise ValueError(f"The physical group {name!r} has dimension {self.dimensions[name]}, but this needs "
                              f"{self._WANTS[dimension]}; its groups are: {self._listing()}.")
 
+    def _nonempty(self, name: str, found: np.ndarray) -> np.ndarray:
+        """`found` (the cells of the group `name`), or a `ValueError` when the group has none in this mesh."""
+        if len(found) == 0:
+            raise ValueError(f"The physical group {name!r} has no cells in this mesh. meshio keeps one physical tag "
+                             "per element of a gmsh 4.1 file, so a group whose surfaces or curves belong to another "
+                             "group as well reads empty: give each surface and curve one physical group (e.g. "
+                             "\"rims\" or \"rim_A\", not both), or put the group's own entities in it.")
+        return found
+
     def names(self, dimension: int | None = None) -> tuple[str, ...]:
         """The group names, sorted; only those of `dimension` if given."""
         return tuple(sorted(n for n, d in self.dimensions.items() if dimension is None or d == dimension))

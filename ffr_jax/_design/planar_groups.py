@@ -47,7 +47,7 @@ class PlanarGroups(NamedGroups):
     def elements(self, name: str) -> np.ndarray:
         """The element indices of the physical surface `name` (a passive region, the design region), sorted."""
         self._check(name, 2)
-        return self._elements[name]
+        return self._nonempty(name, self._elements[name])
 
     def mask(self, name: str) -> np.ndarray:
         """The boolean element mask `(n_elements,)` of the physical surface `name`."""
@@ -59,7 +59,7 @@ class PlanarGroups(NamedGroups):
         """The edges of the physical curve `name` as node pairs `(n_edges, 2)`, each checked to be an edge on the
         boundary of the mesh (a bore, a clamped or loaded edge)."""
         self._check(name, 1)
-        edges = self._edges[name]
+        edges = self._nonempty(name, self._edges[name])
         boundary = {tuple(k) for k in boundary_edges(self.mesh)}
         off = np.flatnonzero([tuple(k) not in boundary for k in np.sort(edges, axis=1)])
         if off.size:
@@ -79,9 +79,9 @@ class PlanarGroups(NamedGroups):
         if dimension == 1:
             nodes = self.edges(name).ravel()
         elif dimension == 2:
-            nodes = self.mesh.elements[self._elements[name]].ravel()
+            nodes = self.mesh.elements[self.elements(name)].ravel()
         else:
-            nodes = self._points[name]
+            nodes = self._nonempty(name, self._points[name])
         return tuple(int(n) for n in np.unique(nodes))
 
 
@@ -94,6 +94,13 @@ def planar_groups_from_meshio(mesh, min_jacobian_ratio: float | None = None) -> 
     **Returns:** a [`PlanarGroups`][]. A named group of dimension 3 or a curve through a node that no quadrilateral
     uses is a `ValueError`.
     """
+    blocks = [np.asarray(b.data) for b in mesh.cells if b.type == "quad"]
+    if blocks:
+        _, counts = np.unique(np.sort(np.concatenate(blocks), axis=1), axis=0, return_counts=True)
+        if np.any(counts > 1):
+            raise ValueError(f"The mesh repeats {np.count_nonzero(counts > 1)} quadrilaterals: a gmsh 2.2 file holds an "
+                             "element once for each physical group of its surface. Give each surface one physical "
+                             "group (e.g. \"rims\" or \"rim_A\", not both).")
     quad_mesh = from_meshio(mesh, min_jacobian_ratio=min_jacobian_ratio)
     named = physical_names(mesh, "Physical Surface/Curve")
     volumes = sorted(name for name, _, dim in named if dim == 3)
