@@ -47,7 +47,8 @@ class SolidDesignDomain(eqx.Module):
     def from_groups(cls, groups: PhysicalGroups, solid: str | tuple[str, ...] = (),
                     void: str | tuple[str, ...] = ()) -> "SolidDesignDomain":
         """Passive regions by name: the elements of the physical volumes `solid` (a name or a tuple of names) are
-        passive solid, those of `void` passive void, the rest design. An unknown name or a surface group is a `ValueError` naming the groups."""
+        passive solid, those of `void` passive void, the rest design. An unknown name or a surface group is a
+        `ValueError` naming the groups."""
         if not isinstance(groups, PhysicalGroups):
             raise TypeError(f"groups must be PhysicalGroups (fj.read_solid_groups), got {type(groups).__name__}.")
         return cls.from_masks(groups.mesh, **masks_by_name(groups, groups.mesh.n_elements, solid, void))
