@@ -114,9 +114,9 @@ class DesignDomain(eqx.Module):
     def from_groups(cls, groups: PlanarGroups, solid: str | tuple[str, ...] = (),
                     void: str | tuple[str, ...] = ()) -> "DesignDomain":
         """Passive regions by name: the elements of the physical surfaces `solid` (a name or a tuple of names) are
-        passive solid, those of `void` passive void, the rest design (e.g. `solid=("rims",)` on a
-        [`link_profile`][ffr_jax.link_profile] or a [`read_planar_groups`][] part). An unknown name or a curve group is a `ValueError`
-        naming the groups."""
+        passive solid, those of `void` passive void, the rest design (e.g. `solid="rims"` on a
+        [`link_profile`][ffr_jax.link_profile] or a [`read_planar_groups`][] part). An unknown name or a curve group
+        is a `ValueError` naming the groups."""
         if not isinstance(groups, PlanarGroups):
             raise TypeError(f"groups must be PlanarGroups (fj.read_planar_groups, fj.link_profile), got "
                             f"{type(groups).__name__}.")

@@ -98,8 +98,8 @@ def planar_groups_from_meshio(mesh, min_jacobian_ratio: float | None = None) -> 
     if blocks:
         _, counts = np.unique(np.sort(np.concatenate(blocks), axis=1), axis=0, return_counts=True)
         if np.any(counts > 1):
-            raise ValueError(f"The mesh repeats {np.count_nonzero(counts > 1)} quadrilaterals: a gmsh 2.2 file holds an "
-                             "element once for each physical group of its surface. Give each surface one physical "
+            raise ValueError(f"The mesh repeats {np.count_nonzero(counts > 1)} quadrilaterals: a gmsh 2.2 file holds "
+                             "an element once for each physical group of its surface. Give each surface one physical "
                              "group (e.g. \"rims\" or \"rim_A\", not both).")
     quad_mesh = from_meshio(mesh, min_jacobian_ratio=min_jacobian_ratio)
     named = physical_names(mesh, "Physical Surface/Curve")

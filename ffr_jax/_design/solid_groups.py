@@ -83,7 +83,8 @@ class PhysicalGroups(NamedGroups):
         return tuple(int(n) for n in np.unique(self.mesh.elements[self._elements[name]]))
 
 
-def solid_groups_from_meshio(mesh, orientation: str = "refuse", min_jacobian_ratio: float | None = None) -> PhysicalGroups:
+def solid_groups_from_meshio(mesh, orientation: str = "refuse",
+                             min_jacobian_ratio: float | None = None) -> PhysicalGroups:
     """The [`PhysicalGroups`][] of a `meshio.Mesh` with gmsh physical groups (`field_data` names and
     `gmsh:physical` cell tags), on its solid mesh (`solid_from_meshio`; `min_jacobian_ratio` passed to it)."""
     solid = solid_from_meshio(mesh, orientation, min_jacobian_ratio)
