@@ -11,6 +11,9 @@ the same structure and shapes log nothing.
 The signature that decides "first call" is the one `filter_jit` caches on: the tree structure of the
 arguments, their non-array leaves (hashable, as `filter_jit` requires) and the shapes and dtypes of
 their array leaves.
+
+The program is compiled with the package's XLA options (`_dynamics/_xla_flags.py`, `program_options`:
+on CPU the concurrency-optimised scheduler off), chosen at the first call, when JAX's backend is known.
 """
 
 import logging
@@ -19,6 +22,8 @@ from collections.abc import Callable
 
 import equinox as eqx
 import jax
+
+from ._dynamics._xla_flags import program_options
 
 logger = logging.getLogger("ffr_jax")
 
@@ -40,12 +45,16 @@ class Program:
     """
 
     def __init__(self, function: Callable, what: str):
-        self._jitted = eqx.filter_jit(function)
+        self._function = function
+        self._jitted = None  # built at the first call: its XLA options depend on the backend
         self._what = what
         self._seen: set = set()
         self.__wrapped__ = function
 
     def __call__(self, *args, detail: str = ""):
+        if self._jitted is None:
+            self._jitted = eqx.filter_jit(self._function,
+                                          compiler_options=program_options(jax.default_backend()) or None)
         try:
             key = _signature(args)
             hash(key)

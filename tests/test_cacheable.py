@@ -6,6 +6,8 @@ same numbers bit for bit; equinox's checks raise again after the `nan`-mode trac
 without a stable name is never keyed.
 """
 
+import os
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -14,6 +16,7 @@ import pytest
 from helpers import ATOL, RTOL, adjoint_value_and_grad, random_design, small_case
 
 import ffr_jax as fj
+from ffr_jax._dynamics._xla_flags import SCHEDULER_OPTION
 from ffr_jax._sensitivity._cached import _program_key, compile_value_and_grad
 
 
@@ -42,11 +45,22 @@ def test_split_programs_give_the_adjoint_gradient(compiled):
     assert np.max(np.abs(grad - grad_ref)) <= 1e-7 * np.max(np.abs(grad_ref)), "gradient vs value_and_grad"
 
 
-def test_a_saved_program_is_loaded_without_tracing(compiled):
+def test_a_saved_program_is_loaded_without_tracing(compiled, monkeypatch):
     case, x, directory, fun, _ = compiled
     jax.clear_caches()
+    # The kept programs are compiled with the package's XLA options (`_dynamics/_xla_flags.py`): on CPU the
+    # concurrency-optimised scheduler off unless the user's XLA_FLAGS set it (the suite's do: removed here).
+    monkeypatch.setenv("XLA_FLAGS", " ".join(f for f in os.environ.get("XLA_FLAGS", "").split()
+                                             if SCHEDULER_OPTION not in f))
+    options = []
+    compile_lowered = jax.stages.Lowered.compile
+    monkeypatch.setattr(jax.stages.Lowered, "compile",
+                        lambda self, compiler_options=None: options.append(compiler_options)
+                        or compile_lowered(self, compiler_options))
     again, info = compile_value_and_grad(case, x, fj.Adjoint(), rtol=RTOL, atol=ATOL, export_dir=directory)
     assert info["exported_loaded"], "the second compilation loads the exported program"
+    expected = {SCHEDULER_OPTION: False} if jax.default_backend() == "cpu" else {}
+    assert len(options) == 3 and all(o == expected for o in options), options
     x2 = random_design(case, 1)
     # The same StableHLO compiled by the same XLA on the same machine: bit-identical results.
     for a, b in zip(jax.tree_util.tree_leaves(fun(x2)), jax.tree_util.tree_leaves(again(x2))):

@@ -1,5 +1,6 @@
 """The guard against a deadlock of jaxlib's CPU runtime (ffr_jax/_dynamics/_xla_flags.py): set by the
-`ffr-jax` command before JAX starts, warned about by `sharded_map(batch_size=...)`, never by `import ffr_jax`.
+`ffr-jax` command before JAX starts, warned about by `sharded_map(batch_size=...)`, never by `import ffr_jax`;
+the package's kept programs carry it as a compile option (`program_options`, no environment edit).
 
 Batched LAPACK kernels under `jax.vmap`, two independent ones per program (a difference quotient
 `f(x + h) - f(x - h)` of a dense modal analysis), hung 3 of 3 runs on 2 cores without the guard; run
@@ -13,6 +14,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from ffr_jax._dynamics._xla_flags import SCHEDULER_OPTION, program_options
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -85,3 +88,11 @@ def test_batched_sharded_map_warns_without_the_guard():
                "print(any('concurrency_optimized_scheduler' in str(m.message) for m in w))")
     assert _run(program, None, timeout=120).stdout.split() == ["True"]
     assert _run(program, "--xla_cpu_enable_concurrency_optimized_scheduler=false", timeout=120).stdout.split() == ["False"]
+
+
+def test_program_options_turn_the_cpu_scheduler_off_unless_the_user_set_it(monkeypatch):
+    monkeypatch.delenv("XLA_FLAGS", raising=False)
+    assert program_options("cpu") == {SCHEDULER_OPTION: False}
+    assert program_options("gpu") == {} and program_options("cuda") == {}
+    monkeypatch.setenv("XLA_FLAGS", f"--{SCHEDULER_OPTION}=true")
+    assert program_options("cpu") == {}, "a setting of the user's is kept"

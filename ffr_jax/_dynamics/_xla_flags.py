@@ -11,11 +11,17 @@ independent branches, e.g. `jax.vmap` over designs of a difference quotient `f(x
 two independent ones per program, hung in 3 of 3 runs (and 3 of 3 other shapes and op mixes); with the
 scheduler off, 0 of 10 runs hung.
 
-Turning the scheduler off costs no measurable run time here (a rigid problem's adjoint gradient:
-0.12 s either way). `import ffr_jax` does not touch the environment: the flag is set where batched
-modal analyses run — the `ffr-jax` command sets it before JAX starts, and [`sharded_map`][] with
-a `batch_size` warns when it is missing. A Python user who `jax.vmap`s dense modal analyses sets it
-before starting Python: `XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=false`.
+The scheduler also slows the package's own programs down: they are long sequences of tiny operations
+(a Rosenbrock step of the reference case is ~10,000 of them on 13-vectors), which it spreads over the
+thread pool, so that every step waits on the pool's hand-offs (benchmarks/RESULTS.md, "Default route":
+the reference gradient with and without it). So the programs the package compiles itself (the kept
+programs of `fj.value_and_grad` and `fj.make_objective`, `ffr_jax/_sensitivity/_cached.py`) are
+compiled with it off through `program_options` — a per-program XLA option, no environment edit —
+unless the user's `XLA_FLAGS` set it. `import ffr_jax` does not touch the environment: the flag is set
+where batched modal analyses run — the `ffr-jax` command sets it before JAX starts, and
+[`sharded_map`][] with a `batch_size` warns when it is missing. A Python user who `jax.vmap`s dense
+modal analyses in programs of their own sets it before starting Python:
+`XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=false`.
 """
 
 import os
@@ -23,6 +29,16 @@ import warnings
 
 
 DEADLOCK_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+SCHEDULER_OPTION = "xla_cpu_enable_concurrency_optimized_scheduler"
+
+
+def program_options(platform: str) -> dict[str, bool]:
+    """XLA options for a program the package compiles itself on `platform` (`Lowered.compile`'s
+    `compiler_options`): on CPU the concurrency-optimised scheduler off (module docstring), unless the
+    user's `XLA_FLAGS` set that option either way; none elsewhere."""
+    if platform != "cpu" or SCHEDULER_OPTION in os.environ.get("XLA_FLAGS", ""):
+        return {}
+    return {SCHEDULER_OPTION: False}
 
 
 def add_flag(flag: str) -> bool:

@@ -61,6 +61,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics._case import Case
+from .._dynamics._xla_flags import program_options
 from .._errors import clean_errors
 from ._base import AbstractSensitivity, psi_of
 from ._finite_differences import FiniteDifferences
@@ -170,6 +171,12 @@ def _program_key(static, treedef, leaves, options) -> str | None:
     h.update(text.encode())
     h.update(repr([(leaf.shape, str(leaf.dtype)) for leaf in leaves]).encode())
     return h.hexdigest()[:32]
+
+
+def _options() -> dict[str, bool]:
+    """XLA options of the kept programs on this platform (`_dynamics/_xla_flags.py`: on CPU the
+    concurrency-optimised scheduler off, which slows their long chains of tiny operations down)."""
+    return program_options(jax.default_backend())
 
 
 CACHE_ENV = "FFR_JAX_CACHE_DIR"
@@ -364,9 +371,9 @@ def _gradient_programs(case, x, method, options, export_dir, need_key: bool = Fa
     programs = {}
     for name, (flat, leaves, _) in parts.items():
         if exported[name] is None:
-            programs[name] = _Program(jax.jit(flat).lower(*leaves).compile(), False)
+            programs[name] = _Program(jax.jit(flat).lower(*leaves).compile(_options()), False)
         else:  # XLA: from the persistent cache when it has the program
-            programs[name] = _Program(jax.jit(exported[name].call).lower(*leaves).compile(),
+            programs[name] = _Program(jax.jit(exported[name].call).lower(*leaves).compile(_options()),
                                       paths[name] is not None and exported[name] is not None and cached)
     gradient = _Gradient(programs["scene"], programs["gradient"], programs["pullback"], scene_static,
                          jax.tree_util.tree_structure(scene_dynamic), jax.tree_util.tree_structure(g_shapes),
@@ -485,9 +492,9 @@ def kept_call(function, args: tuple, directory: pathlib.Path, what: str, out_lik
                     logger.info("%s cannot be exported (%s: %s); it is compiled in every process", what,
                                 type(err).__name__, err)
         if exported is None:
-            compiled = jax.jit(flat).lower(*shapes).compile()
+            compiled = jax.jit(flat).lower(*shapes).compile(_options())
         else:  # XLA: from the persistent cache when it has the program
-            compiled = jax.jit(exported.call).lower(*shapes).compile()
+            compiled = jax.jit(exported.call).lower(*shapes).compile(_options())
         _KEPT[key] = _Kept(compiled, out_static, jax.tree_util.tree_structure(out_dynamic), exported is not None
                            and loading, time.perf_counter() - start)
         out = _KEPT[key](function, args)
@@ -526,7 +533,7 @@ def compile_value_and_grad(case: Case, x, method: AbstractSensitivity, *, rtol: 
     if not cacheable(method):
         fd = jax.jit(lambda x: method.value_and_grad_design(case, case.check(x), rtol=rtol, atol=atol, solver=solver,
                                                             max_steps=max_steps))
-        compiled = clean_errors(fd.lower(x).compile())
+        compiled = clean_errors(fd.lower(x).compile(_options()))
         return compiled, dict(compile_s=time.perf_counter() - start, exported_loaded=False)
     options = (rtol, atol, solver, max_steps)
     programs, _ = _gradient_programs(case, x, method, options, export_dir, memo=False)
