@@ -1,15 +1,13 @@
 """Cylindrical joint between two spatial bodies, or between a body and the ground."""
 
-import equinox as eqx
 import jax.numpy as jnp
 
-from .._scene._base import AbstractConstraint
 from ._marker_frame import marker_directions
-from ._revolute import normals, unit_axis
-from ._spherical import ground_point, other_point, require_spatial
+from ._revolute import AbstractAxisJoint
+from ._spherical import other_point, require_spatial
 
 
-class SpatialCylindrical(AbstractConstraint):
+class SpatialCylindrical(AbstractAxisJoint):
     """Marker `marker_i` of body `body_i` slides along, and turns about, the axis through marker `marker_j` of body
     `body_j` (a piston in its cylinder): two relative motions are free, the rotation about and the translation
     along the common axis.
@@ -31,23 +29,6 @@ class SpatialCylindrical(AbstractConstraint):
 
     Raises `ValueError` for an axis of zero length; a planar body is refused when the scene is traced.
     """
-
-    body_i: int = eqx.field(static=True)
-    marker_i: int = eqx.field(static=True)
-    body_j: int = eqx.field(static=True)
-    marker_j: int = eqx.field(static=True)
-    axis_i: jnp.ndarray
-    normals_j: jnp.ndarray
-    point: jnp.ndarray
-
-    def __init__(self, body_i: int, marker_i: int, axis_i, body_j: int = -1, marker_j: int = 0, axis_j=None,
-                 point=(0.0, 0.0, 0.0)):
-        self.body_i, self.marker_i, self.body_j, self.marker_j = int(body_i), int(marker_i), int(body_j), int(marker_j)
-        a_i = unit_axis(axis_i, "SpatialCylindrical axis_i")
-        a_j = a_i if axis_j is None else unit_axis(axis_j, "SpatialCylindrical axis_j")
-        self.axis_i = jnp.asarray(a_i)
-        self.normals_j = jnp.asarray(normals(a_j))
-        self.point = ground_point(point, "SpatialCylindrical")
 
     @property
     def n_equations(self) -> int:

@@ -41,7 +41,34 @@ def marker_axis(scene, body: int, marker: int, axis_body, y_r):
     return rotation_matrix(y_b[3:7]) @ axis_body
 
 
-class SpatialRevolute(AbstractConstraint):
+class AbstractAxisJoint(AbstractConstraint):
+    """A joint between marker `marker_i` and axis `axis_i` of body `body_i` and marker `marker_j` and axis `axis_j`
+    of body `body_j` (or, with `body_j = -1`, the inertial `point` and `axis_j`): the fields and constructor that
+    [`SpatialRevolute`][ffr_jax.SpatialRevolute] and [`SpatialCylindrical`][ffr_jax.SpatialCylindrical] share.
+    `axis_j` defaults to `axis_i`; the axes are normalised, and `axis_j` is kept as its two unit normals
+    `normals_j`. Raises `ValueError` for an axis of zero length and a ground point that is not a finite `(3,)`
+    vector."""
+
+    body_i: int = eqx.field(static=True)
+    marker_i: int = eqx.field(static=True)
+    body_j: int = eqx.field(static=True)
+    marker_j: int = eqx.field(static=True)
+    axis_i: jnp.ndarray
+    normals_j: jnp.ndarray
+    point: jnp.ndarray
+
+    def __init__(self, body_i: int, marker_i: int, axis_i, body_j: int = -1, marker_j: int = 0, axis_j=None,
+                 point=(0.0, 0.0, 0.0)):
+        name = type(self).__name__
+        self.body_i, self.marker_i, self.body_j, self.marker_j = int(body_i), int(marker_i), int(body_j), int(marker_j)
+        a_i = unit_axis(axis_i, f"{name} axis_i")
+        a_j = a_i if axis_j is None else unit_axis(axis_j, f"{name} axis_j")
+        self.axis_i = jnp.asarray(a_i)
+        self.normals_j = jnp.asarray(normals(a_j))
+        self.point = ground_point(point, name)
+
+
+class SpatialRevolute(AbstractAxisJoint):
     """A hinge: marker `marker_i` of body `body_i` on marker `marker_j` of body `body_j`, and the body axis
     `axis_i` of body `i` parallel to the axis `axis_j` of body `j`.
 
@@ -56,23 +83,6 @@ class SpatialRevolute(AbstractConstraint):
 
     Raises `ValueError` for an axis of zero length.
     """
-
-    body_i: int = eqx.field(static=True)
-    marker_i: int = eqx.field(static=True)
-    body_j: int = eqx.field(static=True)
-    marker_j: int = eqx.field(static=True)
-    axis_i: jnp.ndarray
-    normals_j: jnp.ndarray
-    point: jnp.ndarray
-
-    def __init__(self, body_i: int, marker_i: int, axis_i, body_j: int = -1, marker_j: int = 0, axis_j=None,
-                 point=(0.0, 0.0, 0.0)):
-        self.body_i, self.marker_i, self.body_j, self.marker_j = int(body_i), int(marker_i), int(body_j), int(marker_j)
-        a_i = unit_axis(axis_i, "SpatialRevolute axis_i")
-        a_j = a_i if axis_j is None else unit_axis(axis_j, "SpatialRevolute axis_j")
-        self.axis_i = jnp.asarray(a_i)
-        self.normals_j = jnp.asarray(normals(a_j))
-        self.point = ground_point(point, "SpatialRevolute")
 
     @property
     def n_equations(self) -> int:
