@@ -19,6 +19,7 @@ import pathlib
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 
 HERE = pathlib.Path(__file__).parent
@@ -72,20 +73,34 @@ def row(modes: int) -> dict:
                 load=os.getloadavg()[0])
 
 
+def _fresh_row(modes: int, xla_flags: str | None = None) -> dict:
+    """One row in a fresh process with an empty cache folder (`xla_flags`: added to XLA_FLAGS)."""
+    env = {**os.environ, "JAX_ENABLE_COMPILATION_CACHE": "false", "FFR_JAX_CACHE_DIR": tempfile.mkdtemp()}
+    if xla_flags:
+        env["XLA_FLAGS"] = f"{env.get('XLA_FLAGS', '')} {xla_flags}".strip()
+    out = subprocess.run([sys.executable, __file__, "--row", str(modes)], capture_output=True, text=True, check=True,
+                         env=env)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--row", type=int)
     parser.add_argument("--modes", type=int, nargs="+", default=[6, 15, 30])
+    parser.add_argument("--scheduler-too", action="store_true",
+                        help="also run each row with XLA's CPU concurrency-optimised scheduler on (XLA_FLAGS), as the "
+                             "package's programs were compiled before they turned it off")
     args = parser.parse_args()
     if args.row is not None:
         print(json.dumps(row(args.row)))
         return
     rows = []
     for modes in args.modes:
-        out = subprocess.run([sys.executable, __file__, "--row", str(modes)], capture_output=True, text=True,
-                             check=True, env={**os.environ, "JAX_ENABLE_COMPILATION_CACHE": "false"})
-        rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+        rows.append(_fresh_row(modes))
         print(rows[-1], flush=True)
+        if args.scheduler_too:
+            rows[-1]["scheduler_on"] = _fresh_row(modes, "--xla_cpu_enable_concurrency_optimized_scheduler=true")
+            print(rows[-1]["scheduler_on"], flush=True)
     sys.path.insert(0, str(HERE))
     from _results import machine, write_section
 
@@ -112,6 +127,19 @@ def main():
             f"{r['first']:.1f} | {r['trace']:.1f} / {r['lower']:.1f} / {r['xla']:.1f} | {r['gradient']:.3f} | "
             f"{r['forward']:.3f} | {r['gradient'] / r['forward']:.1f} | {against_six} | {r['psi_error']:.1e} | "
             f"{r['grad_error']:.1e} | {r['load']:.1f} |")
+    on = [r for r in rows if "scheduler_on" in r]
+    if on:
+        lines += ["", "The package compiles its programs with XLA's CPU concurrency-optimised scheduler off "
+                  "(`ffr_jax/_dynamics/_xla_flags.py`, `program_options`). The same rows, each in another fresh process "
+                  "with `XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=true` (the programs as compiled "
+                  "before, when only the `ffr-jax` command turned it off):", "",
+                  "| modes | gradient, scheduler off (default) [s] | gradient, scheduler on [s] | on / off | forward off / on [s] |"
+                  " first call off / on [s] | load |", "|---:|---:|---:|---:|---|---|---|"]
+        for r in on:
+            o = r["scheduler_on"]
+            lines.append(f"| {r['modes']} | {r['gradient']:.3f} | {o['gradient']:.3f} | {o['gradient'] / r['gradient']:.2f} | "
+                         f"{r['forward']:.3f} / {o['forward']:.3f} | {r['first']:.1f} / {o['first']:.1f} | "
+                         f"{r['load']:.1f} / {o['load']:.1f} |")
     lines += ["", "Why each route (the log line, `fj.choose_route(case).reason`):", ""]
     lines += [f"- {r['modes']} modes: {r['route']}" for r in rows]
     write_section("Default route", "\n".join(lines))
