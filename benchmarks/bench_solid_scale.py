@@ -75,7 +75,7 @@ def clock(fn, *args):
     return time.perf_counter() - start, out
 
 
-def row(n_elements: int) -> dict:
+def row(n_elements: int, dynamics: bool = True) -> dict:
     nx, ny, nz = GRIDS[n_elements]
     out = {"elements": n_elements, "grid": f"{nx} x {ny} x {nz}", "load_start": os.getloadavg()[0]}
     cpu_start, wall_start = time.process_time(), time.perf_counter()
@@ -109,16 +109,22 @@ def row(n_elements: int) -> dict:
     del modes
     out["modes_s"] = out["forward_s"] - out["body_data_s"]
 
-    law = RampLaw(t_ramp=T_RAMP, angle_at_ramp=SPEED * T_RAMP / 2, speed=SPEED)
-    problem = spatial_slider_crank_problem(None, ECCENTRICITY, law, T1, rod_data=data)
-    start = time.perf_counter()
-    psi, grad = fj.value_and_grad(problem, method="adjoint", rtol=RTOL, atol=ATOL)
-    out["dynamics_first_s"] = time.perf_counter() - start
-    out["dynamics_s"], (psi, grad) = clock(lambda: fj.value_and_grad(problem, method="adjoint", rtol=RTOL, atol=ATOL))
-    out["psi"] = float(psi)
-    cotangent = grad.scene.bodies[0].data
-    print(f"  dynamics gradient: first call (compile or load) {out['dynamics_first_s']:.1f} s, run "
-          f"{out['dynamics_s']:.2f} s, psi = {float(psi):.6e}", flush=True)
+    if dynamics:
+        law = RampLaw(t_ramp=T_RAMP, angle_at_ramp=SPEED * T_RAMP / 2, speed=SPEED)
+        problem = spatial_slider_crank_problem(None, ECCENTRICITY, law, T1, rod_data=data)
+        start = time.perf_counter()
+        psi, grad = fj.value_and_grad(problem, method="adjoint", rtol=RTOL, atol=ATOL)
+        out["dynamics_first_s"] = time.perf_counter() - start
+        out["dynamics_s"], (psi, grad) = clock(lambda: fj.value_and_grad(problem, method="adjoint", rtol=RTOL,
+                                                                          atol=ATOL))
+        out["psi"] = float(psi)
+        cotangent = grad.scene.bodies[0].data
+        print(f"  dynamics gradient: first call (compile or load) {out['dynamics_first_s']:.1f} s, run "
+              f"{out['dynamics_s']:.2f} s, psi = {float(psi):.6e}", flush=True)
+    else:  # the FE stage alone: a cotangent of the body data's shape (the VJP's cost does not depend on its values)
+        cotangent = jax.tree_util.tree_map(lambda a: jnp.asarray(np.random.default_rng(1).standard_normal(a.shape)),
+                                           data)
+        out["dynamics_s"] = float("nan")
 
     start = time.perf_counter()
     backward = jax.jit(lambda pullback, cotangent: pullback(cotangent)[0]).lower(pullback, cotangent).compile()
@@ -153,12 +159,14 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser()
     parser.add_argument("--elements", type=int, nargs="+", choices=sorted(GRIDS))
     parser.add_argument("--table", action="store_true")
+    parser.add_argument("--fe-only", action="store_true", help="skip the dynamics (FE stage and its VJP only)")
     args = parser.parse_args()
     path = OUT / "rows.json"
     rows = json.loads(path.read_text()) if path.exists() else []
     for n in args.elements or ():
-        result = row(n)
-        rows = [r for r in rows if r["elements"] != n] + [result]
+        result = row(n, dynamics=not args.fe_only)
+        key = (n, args.fe_only)
+        rows = [r for r in rows if (r["elements"], r.get("fe_only", False)) != key] + [dict(result, fe_only=args.fe_only)]
         OUT.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(rows, indent=1))
     if args.table or not args.elements:
