@@ -137,3 +137,15 @@ def test_vtu_series_of_the_solid_rod(rods, tmp_path):
     np.testing.assert_allclose(first.points[bore].mean(axis=0), [0.06, 0.0, 0.03], atol=1e-10)
     assert np.abs(first.point_data["elastic_displacement"]).max() == 0.0
     assert np.abs(last.point_data["elastic_displacement"]).max() > 0.0
+
+
+@pytest.mark.slow  # gmsh and the body data of the two-layer rod (about 20 s of one quiet core)
+def test_cli_info_connecting_rod(capsys):
+    from ffr_jax._app._cli import main
+
+    assert main(["info", "connecting-rod", "--mesh-size", "0.02", "--modes", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "connecting rod:" in out and "crank pin offset 0.03 m" in out
+    frequencies = [float(f) for f in out.split("natural frequencies [Hz]: ")[1].splitlines()[0].split(", ")]
+    # Two retained modes, ascending and positive (the supports remove the rigid motions).
+    assert len(frequencies) == 2 and 0.0 < frequencies[0] <= frequencies[1]
