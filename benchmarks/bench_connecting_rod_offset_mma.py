@@ -4,9 +4,9 @@ pin is offset along the pin axis, so that the rod runs tilted and is loaded acro
 Scene (`fj.cases.connecting_rod_slider_crank(..., pin_offset=...)`): the rod on the crank pin in a universal joint,
 its small end on the slider line in a ball joint; a jerk-free run-up to engine speed (`--speed`, default 100 pi rad/s
 = 3000 rpm) in `--ramp` s, modal damping `--zeta` of the rod. Objective: the rod's compliance averaged over the window
-`[--average-from, --t1]` (default one whole crank turn at steady speed, after the run-up's transient has decayed):
-a periodic quantity, so it does not swing with the phase of the elastic modes at `t1` as the compliance of a run-up
-does (RESULTS: the earlier short runs). MMA with a density filter (radius in metres, isotropic), Heaviside projection
+`[--average-from, --t1]` (default one whole crank turn at steady speed, after the run-up): the loads of a full turn,
+where a run-up's compliance covers part of one. Four modes (`--modes`): with two, the second and third (both in-plane)
+cross as the web changes and psi jumps as they swap (RESULTS). MMA with a density filter (radius in metres, isotropic), Heaviside projection
 with `fj.beta_continuation` (doubling every `--every` steps up to `--beta-max`), volume fraction `--volume` of the web
 (the hubs passive solid).
 
@@ -15,6 +15,7 @@ killed run), `step_XXXX.npz` with the physical densities of every step, and `fin
 centroids, histories of psi, volume, grey share, beta and wall time).
 
     nohup python benchmarks/bench_connecting_rod_offset_mma.py > log 2>&1 &
+    python benchmarks/bench_connecting_rod_offset_mma.py --resume --steps 76 --beta-max 256   # RESULTS' tail
 """
 
 import argparse

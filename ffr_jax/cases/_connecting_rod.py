@@ -23,8 +23,8 @@ from the crank's plane, the rod hangs on it in a universal joint (arms: the pin 
 small end B runs on the `x`-axis in a ball joint: the rod runs tilted by `asin(e / l)` out of the crank's plane, and
 the inertia loads in that plane load it across its own plane as well, exciting its out-of-plane modes. Options of
 that scene: modal damping of the rod and the compliance averaged over a window `[t_a, t1]` ([`TimeWindow`][]), the
-worked example's design objective (RESULTS: at steady speed, after a run-up whose transient the damping removes,
-the average over whole crank turns is periodic and does not swing with the phase of the elastic modes at `t1`).
+worked example's design objective (RESULTS: the average over a whole crank turn at steady speed, after a run-up
+whose transient the damping removes, gives the design the loads of a full turn).
 """
 
 from .._checks import integer, number, positive
