@@ -308,6 +308,8 @@ def _run_command(args: argparse.Namespace) -> int:
                      f"{c.minimum if isinstance(c, FrequencyConstraint) else c.bound:g}" for c in constraints[1:])
     radius = (f"filter radius {s['filter_radius']}" if s["filter_length"] is None
               else f"filter radius {s['filter_length']:g} m")
+    if s["case"] == "connecting-rod" and s["filter_length"] is None:
+        radius = "filter radius 0.025 m"  # the solid's default (_problem)
     print(f"optimize {describe(s['case'], case)}, "
           f"V = {s['volume']}{bounds}, {s['optimizer']}, {radius}{projected}, "
           f"{args.iters} steps -> {directory}")
