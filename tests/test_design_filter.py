@@ -49,6 +49,13 @@ def test_filter_on_an_unstructured_mesh_with_passive_elements():
     a = domain.design_areas()
     np.testing.assert_allclose(jnp.mean(filt.volume_weights() * x), a @ (h @ np.asarray(x)) / a.sum(), rtol=1e-13,
                                err_msg="volume = true area fraction")
+    # The same with a projection: the constraint holds the area fraction of P_beta(H x), not the elements' mean
+    # (which differs by percents here: the areas vary tenfold). Both sides sum the same products: round-off.
+    projection = ffr_jax.HeavisideProjection(0.5, x_min=0.01)
+    volume = ffr_jax.VolumeConstraint(0.5, filter=filt, projection=projection)
+    x_phys = np.asarray(projection(filt(x), 8.0))
+    np.testing.assert_allclose(volume.fraction(x, 8.0), a @ x_phys / a.sum(), rtol=1e-13, err_msg="projected volume")
+    assert abs(a @ x_phys / a.sum() - x_phys.mean()) > 1e-3, "the check can tell the area fraction from the mean"
     assert np.array_equal(np.asarray(fd.DensityFilter(domain, 0.0).matrix()), np.eye(domain.n_design)), "r = 0: H = I"
     # The default unit on an unstructured mesh is the element size sqrt(mean area).
     h_unit = np.sqrt(np.mean(a))

@@ -12,6 +12,13 @@ from ._constraint import AbstractDesignConstraint, status
 from ._projection import HeavisideProjection
 
 
+def _design_areas(filter: DensityFilter | StackedFilter):
+    """The areas (volumes) of the design elements a filter acts on, in design order."""
+    if isinstance(filter, StackedFilter):
+        return jnp.concatenate([filter.filters[name].areas for name in filter.layout.names])
+    return filter.areas
+
+
 class VolumeConstraint(AbstractDesignConstraint):
     """The feasible designs `{x : x_min <= x <= 1, mean(c x) = V}`, or the inequality `mean(c x) <= V`.
 
@@ -22,8 +29,8 @@ class VolumeConstraint(AbstractDesignConstraint):
     is also the mass fraction of the design domain as long as no element lies below 0.1.
 
     With a [`HeavisideProjection`][] the physical densities are `x_phys = P_beta(H x)`, the
-    volume `mean(P_beta(H x))` is nonlinear in `x`, and the constraint is held on it
-    (`fraction` and `project` then take `beta`).
+    volume, their area fraction `sum(a P_beta(H x)) / sum(a)` (`a` the element areas), is nonlinear
+    in `x`, and the constraint is held on it (`fraction` and `project` then take `beta`).
 
     **Arguments:**
     - `volume`: the target fraction `V`, in `(x_min, 1]`.
@@ -88,8 +95,12 @@ class VolumeConstraint(AbstractDesignConstraint):
         if isinstance(self.filter, dict):
             return self._shared_fraction(x, beta)
         if self.projection is not None:
-            x_filtered = x if self.filter is None else self.filter(x)
-            return jnp.mean(self.projection(x_filtered, beta))
+            if self.filter is None:
+                return jnp.mean(self.projection(x, beta))
+            # The area fraction of the projected densities, as `mean(c x)` is without a projection (on an
+            # unstructured mesh the plain mean of the elements is not the volume).
+            areas = _design_areas(self.filter)
+            return jnp.sum(areas * self.projection(self.filter(x), beta)) / jnp.sum(areas)
         return jnp.mean(x if self.weights is None else self.weights * x)
 
     def physical(self, x: Designs, beta: Scalar | float | None = None) -> Designs:
