@@ -665,6 +665,22 @@ def test_mma_takes_a_design_of_two_bodies_with_a_volume_each(tmp_path):
                                   err_msg="the checkpoint holds the flat design, bodies in sorted name order")
 
 
+def test_an_objective_that_compiles_itself_is_called_untraced_for_a_dict_design():
+    # fj.optimize flattens a dict design into one vector; a case's objective from make_objective runs its own
+    # (kept) programs (`compiles_itself`) and must be called as it is, not traced into a program of its own that
+    # every process would compile again (it was: issue 30, found with the two links).
+    filters, fun, x0 = two_bodies()
+    traced = []
+
+    def own(x):
+        traced.append(any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x)))
+        return fun(x)
+
+    own.compiles_itself = True
+    fj.optimize(own, x0, fj.MMA(X_MIN), fj.VolumeConstraint(0.45, filter=filters), iterations=2, progress=False)
+    assert traced and not any(traced), traced
+
+
 def test_a_volume_shared_by_two_bodies_is_their_area_fraction():
     filters, fun, x0 = two_bodies()
     shared = fj.VolumeConstraint(0.45, filter=filters)

@@ -106,4 +106,7 @@ def raveled_objective(fun: Callable, unravel: Callable) -> Callable:
         value, grad = fun(unravel(x), *beta)
         return value, ravel_pytree(grad)[0]
 
+    # A case's objective that runs its own compiled (and kept) programs stays uncompiled around them: the
+    # ravelling is cheap, and a program of its own would trace the case again in every process.
+    flat.compiles_itself = getattr(fun, "compiles_itself", False)
     return flat
