@@ -54,6 +54,8 @@ def main():
     parser.add_argument("--beta-every", type=int, default=10, help="steps between doublings of beta")
     parser.add_argument("--rtol", type=float, default=1e-8, help="tolerance of the solves inside the loop")
     parser.add_argument("--resume", action="store_true", help="continue the run checkpointed in <out>/run")
+    parser.add_argument("--force-resume", action="store_true",
+                        help="continue it with other settings (e.g. a higher --beta-max from the checkpoint on)")
     parser.add_argument("--coarse", type=pathlib.Path, default=None,
                         help="a run's folder on half the elements per direction: the refinement check")
     parser.add_argument("--out", type=pathlib.Path,
@@ -93,6 +95,7 @@ def run(args):
     # Each gradient call's time and the wall time since the run started go to <out>/gradient_calls.txt as they
     # happen, so that a killed and resumed run still reports where all its time went.
     calls_file = args.out / "gradient_calls.txt"
+    args.resume = args.resume or args.force_resume
     earlier = np.loadtxt(calls_file, ndmin=2) if args.resume and calls_file.exists() else np.zeros((0, 2))
     if not args.resume:
         calls_file.write_text("")
@@ -115,11 +118,15 @@ def run(args):
     config = {"nx": args.nx, "ny": args.ny, "modes": args.modes, "t1": args.t1, "volume": args.volume,
               "filter_m": filter_m, "beta_start": args.beta_start, "beta_max": args.beta_max,
               "beta_every": args.beta_every, "rtol": args.rtol}
+    if args.force_resume:
+        # The checkpoint's settings stand for its steps; the new ones (e.g. a higher beta_max) act from it on.
+        config = json.loads(str(np.load(args.out / "run" / "checkpoint.npz")["config"]))
     x0 = case.initial_design(args.volume)
     start = time.perf_counter()
     started.append(start)
     result = fj.optimize(timed_fun, x0, fj.MMA(x_min), volume, iterations=args.iters, progress=True,
-                         beta=schedule, directory=args.out / "run", resume=args.resume, checkpoint_every=5,
+                         beta=schedule, directory=args.out / "run", resume=args.resume or args.force_resume, checkpoint_every=5,
+                         force_resume=args.force_resume,
                          config=config)
     run_s = wall_before + time.perf_counter() - start
     h = result.history
