@@ -9,7 +9,8 @@ mesh size, iterations, wall time and what it was spent on (the objective's gradi
 projection, driver), psi of the final physical design against the uniform design of equal volume (both at the
 paper's forward tolerances rtol 1e-10, atol 1e-12), the volume, the grey share (`fj.grey_share`,
 0.1 < x_phys < 0.9) and a density picture. The run checkpoints into `<out>/run/` every 5 steps; `--resume`
-continues a killed run there (bit for bit, see `fj.optimize`).
+continues a killed run there (bit for bit, see `fj.optimize`); `--force-resume` continues it with other settings
+from the checkpoint on (e.g. `--beta-max 128 --iters 160`: the later steps at the higher beta).
 
 With `--coarse DIR` (a run on half the elements per direction, same filter length and continuation) the summary
 also holds the refinement check: the coarse physical design mapped onto this mesh (each coarse element = 2 x 2
