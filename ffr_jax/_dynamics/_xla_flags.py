@@ -11,10 +11,11 @@ independent branches, e.g. `jax.vmap` over designs of a difference quotient `f(x
 two independent ones per program, hung in 3 of 3 runs (and 3 of 3 other shapes and op mixes); with the
 scheduler off, 0 of 10 runs hung.
 
-The scheduler also slows the package's own programs down: they are long sequences of tiny operations
-(a Rosenbrock step of the reference case is ~10,000 of them on 13-vectors), which it spreads over the
-thread pool, so that every step waits on the pool's hand-offs (benchmarks/RESULTS.md, "Default route":
-the reference gradient with and without it). So the programs the package compiles itself (the kept
+On a loaded machine the scheduler also slows the package's own programs down: they are long sequences of
+tiny operations (a Rosenbrock step of the reference case is ~10,000 of them on 13-vectors), which it
+spreads over the thread pool, so that steps wait on the pool's hand-offs (the reference gradient's later
+call at load 11.7: 12.2 s with it off, 16.1 s on; at load 1.7-3.5 no difference, 2.7-4.0 s either way:
+benchmarks/RESULTS.md, "Default route"). So the programs the package compiles itself (the kept
 programs of `fj.value_and_grad` and `fj.make_objective`, `ffr_jax/_sensitivity/_cached.py`) are
 compiled with it off through `program_options` — a per-program XLA option, no environment edit —
 unless the user's `XLA_FLAGS` set it. `import ffr_jax` does not touch the environment: the flag is set
