@@ -12,10 +12,10 @@ from .._scene._body import Body
 from .._scene._damping import ModalDamping
 from .._scene._scene import Scene
 from .._spatial._angle_driver import EulerNormalisation, SpatialAngleDriver
-from .._spatial._body_data import spatial_rigid_body_data
 from .._spatial._point_on_line import SpatialPointOnLine
 from .._spatial._revolute import SpatialRevolute
 from .._spatial._universal import SpatialUniversal
+from ._spatial_slider_crank import spatial_crank
 
 _Z = (0.0, 0.0, 1.0)
 
@@ -73,10 +73,7 @@ def offset_slider_crank_problem(rod_data, eccentricity: float, pin_offset: float
     length = float(rod_data.marker_positions[1, 0])
     if not abs(offset) < length:
         raise ValueError(f"The crank pin offset must be shorter than the rod (|e| < l = {length}), got {offset}.")
-    crank = Body("crank", spatial_rigid_body_data(
-        mass, (mass * radius / 2, 0.0, 0.0),
-        np.diag([1e-6, mass * radius**2 / 3, mass * radius**2 / 3]) + 1e-6 * np.eye(3),
-        [(0.0, 0.0, 0.0), (radius, 0.0, offset)]))
+    crank = spatial_crank(radius, offset, mass)
     forces = (ModalDamping(0, damping_ratio),) if damping_ratio > 0 else ()
     scene = Scene(
         bodies=(rod, crank),

@@ -38,6 +38,16 @@ def spatial_slider_crank_guess(t, y, scene):
     return jnp.concatenate([pin, _half_turn(-jnp.arcsin(pin[1] / length)), jnp.zeros(3), _half_turn(phi)])
 
 
+def spatial_crank(radius: float, pin_offset: float = 0.0, mass: float = 0.1) -> Body:
+    """The crank of the spatial slider-cranks: a slender rigid bar of `mass` along its x axis, from the bearing
+    (marker 0, the origin) to the crank pin (marker 1, `(radius, 0, pin_offset)`), with a small regularising
+    inertia about every axis."""
+    return Body("crank", spatial_rigid_body_data(
+        mass, (mass * radius / 2, 0.0, 0.0),
+        np.diag([1e-6, mass * radius**2 / 3, mass * radius**2 / 3]) + 1e-6 * np.eye(3),
+        [(0.0, 0.0, 0.0), (radius, 0.0, pin_offset)]))
+
+
 def spatial_slider_crank_problem(rod_body, eccentricity: float, law, t1: float, rod_data=None) -> Problem:
     """The [`Problem`][] of `slider_crank(..., spatial=True)` (see there); `rod_body` is the planar designed rod
     (lifted), or `rod_data` the rod's [`SpatialFlexibleBodyData`][] (markers A and B on its x-axis; then `rod_body`
@@ -51,11 +61,8 @@ def spatial_slider_crank_problem(rod_body, eccentricity: float, law, t1: float, 
     equation); the rod's Euler normalisation. Independent coordinates: the rod's `q`, as in the planar case.
     """
     rod = Body("rod", uniform_lifted_body_data(rod_body) if rod_data is None else rod_data)
-    mass, radius = 0.1, float(eccentricity)
-    crank = Body("crank", spatial_rigid_body_data(
-        mass, (mass * radius / 2, 0.0, 0.0),
-        np.diag([1e-6, mass * radius**2 / 3, mass * radius**2 / 3]) + 1e-6 * np.eye(3),
-        [(0.0, 0.0, 0.0), (radius, 0.0, 0.0)]))
+    radius = float(eccentricity)
+    crank = spatial_crank(radius)
     scene = Scene(
         bodies=(rod, crank),
         constraints=(
