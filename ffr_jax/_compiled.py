@@ -14,6 +14,8 @@ their array leaves.
 
 The program is compiled with the package's XLA options (`_dynamics/_xla_flags.py`, `program_options`:
 on CPU the concurrency-optimised scheduler off), chosen at the first call, when JAX's backend is known.
+Called with traced arguments (inside a user's `jax.jit` or `jax.vmap`) it is traced into the caller's
+program instead, without options of its own (JAX refuses compiler options on a nested jit).
 """
 
 import logging
@@ -47,11 +49,16 @@ class Program:
     def __init__(self, function: Callable, what: str):
         self._function = function
         self._jitted = None  # built at the first call: its XLA options depend on the backend
+        # Called inside another program (a user's jax.jit, or jax.vmap): JAX takes compiler options only on a
+        # top-level jit, and the outer program is compiled with its own, so the function is jitted without them.
+        self._nested = eqx.filter_jit(function)
         self._what = what
         self._seen: set = set()
         self.__wrapped__ = function
 
     def __call__(self, *args, detail: str = ""):
+        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(args)):
+            return self._nested(*args)  # traced into the caller's program: compiled, and logged, with it
         if self._jitted is None:
             self._jitted = eqx.filter_jit(self._function,
                                           compiler_options=program_options(jax.default_backend()) or None)
