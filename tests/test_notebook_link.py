@@ -1,9 +1,9 @@
 """Execute notebooks/link_four_bar.ipynb headless at its small size (its cells assert the gradient
 agreement, the area fraction and the descent).
 
-Slow: the four-bar's gradient compiles three times (adjoint, autodiff, the optimisation step),
-several minutes on a 2-core CPU; tests/test_link_four_bar.py checks the same gradient in the
-default selection.
+Slow: the four-bar's gradient compiles twice (adjoint, autodiff; at the small size the optimisation loop runs the
+adjoint program of the gradient check: 203 s in CI's slow set when it compiled its own), minutes on a 2-core CPU;
+tests/test_link_four_bar.py checks the same gradient (slow set too).
 """
 
 import pathlib
