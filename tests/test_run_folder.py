@@ -123,6 +123,20 @@ def test_resume_refuses_another_objective_constraint_or_optimizer(tmp_path):
     _run(tmp_path, 3, fun=fun, volume=0.3, resume=True)  # the forced run stored its own fingerprints
 
 
+def test_changed_settings_are_refused_unless_forced_and_then_named(tmp_path):
+    """The `config` settings of a run (the CLI's options) likewise: another value is refused with both values
+    named and the way to override; with `force_resume` the run continues, warns which settings changed, and its
+    checkpoints keep the new ones (a plain resume with them is accepted after)."""
+    _run(tmp_path, 1, config={"beta_max": 64})
+    with pytest.raises(fj.CheckpointError, match=r"beta_max: checkpoint 64, now 128.*force_resume=True"):
+        _run(tmp_path, 2, config={"beta_max": 128}, resume=True)
+    with pytest.warns(UserWarning, match=r"changed settings \(force_resume\): beta_max: checkpoint 64, now 128"):
+        result = _run(tmp_path, 2, config={"beta_max": 128}, resume=True, force_resume=True)
+    assert result.history.steps == 2
+    assert fj.load_checkpoint(tmp_path / "checkpoint.npz").config == {"beta_max": 128}
+    _run(tmp_path, 3, config={"beta_max": 128}, resume=True)
+
+
 def test_make_objective_fingerprints_tell_meshes_apart():
     """Two rods with the same number of densities on other meshes (length 1 and 1.1 m) have other fingerprints; the
     same case built twice has the same (so a resume in a new process is accepted)."""

@@ -106,8 +106,9 @@ def optimize(fun: Callable, x0, optimizer, constraints=None, *, iterations: int,
       objective (for [`make_objective`][]: the case with its mesh and body data, filter,
       projection, method and tolerances), of the constraints (bounds, filters) and of the
       optimizer (e.g. MMA's move limit); a resume whose objects differ is refused.
-    - `force_resume`: resume even when those fingerprints differ (the run then continues with the
-      objects given now, and its later checkpoints store their fingerprints).
+    - `force_resume`: resume even when those fingerprints or the `config` settings differ (the run then
+      continues with the objects and settings given now, with a warning naming the settings that changed,
+      and its later checkpoints store the new ones).
     - `checkpoint_every`: steps between checkpoints.
     - `config`: JSON-serialisable settings that define the run (stored in each checkpoint; a
       resume with different settings is refused, and so is one with other constraints).
@@ -385,8 +386,13 @@ _WHAT = {"objective": "objective (case, mesh, body data, filter, projection, met
 def _check_resume(checkpoint: Checkpoint, given: dict, fingerprint: dict, force: bool, directory) -> None:
     """The settings agree with the checkpoint's, and (unless `force`) so do the fingerprints of the objects."""
     stored_print = checkpoint.fingerprint
+    if force:  # continue with what is given now; say which settings changed
+        changed = _config_changes(checkpoint.config, given)
+        if changed:
+            warnings.warn(f"Resuming {directory} with changed settings (force_resume): {changed}.", stacklevel=4)
+        return
     _check_config(checkpoint.config, given)
-    if force or not isinstance(stored_print, dict):  # checkpoints written before fingerprints: settings only
+    if not isinstance(stored_print, dict):  # checkpoints written before fingerprints: settings only
         return
     differ = [key for key in ("objective", "constraints", "optimizer")
               if stored_print.get(key) is not None and fingerprint.get(key) is not None
@@ -400,11 +406,17 @@ def _check_resume(checkpoint: Checkpoint, given: dict, fingerprint: dict, force:
         )
 
 
-def _check_config(stored: dict, given: dict) -> None:
+def _config_changes(stored: dict, given: dict) -> str:
+    """The settings that differ between a checkpoint and this run, as `key: checkpoint a, now b; ...` ('' if none)."""
     differ = sorted(key for key in set(stored) | set(given) if stored.get(key) != given.get(key))
-    if differ:
-        details = "; ".join(f"{key}: checkpoint {stored.get(key)!r}, now {given.get(key)!r}" for key in differ)
-        raise CheckpointError(f"Cannot resume: the run's settings differ from the checkpoint's ({details}).")
+    return "; ".join(f"{key}: checkpoint {stored.get(key)!r}, now {given.get(key)!r}" for key in differ)
+
+
+def _check_config(stored: dict, given: dict) -> None:
+    details = _config_changes(stored, given)
+    if details:
+        raise CheckpointError(f"Cannot resume: the run's settings differ from the checkpoint's ({details}); pass "
+                              "force_resume=True (ffr-jax optimize --force-resume) to continue with the new ones.")
 
 
 def _log_header(names) -> str:
