@@ -94,3 +94,14 @@ def test_gmsh_file_round_trip(tmp_path):
         g.elements("bore")
     with pytest.raises(FileNotFoundError, match="no mesh file"):
         fj.read_solid_groups(tmp_path / "missing.msh")
+
+
+def test_a_named_group_without_cells_is_an_error():
+    """A name in the file whose cells meshio did not keep (gmsh 4.1 keeps one physical tag per element, so a group
+    sharing its entities with another reads empty) is refused with that reason, not used as an empty set."""
+    meshio_mesh, _ = _bar()
+    meshio_mesh.field_data.update({"bore": np.array([9, 2]), "web": np.array([10, 3])})  # names without cells
+    g = fj.solid_groups_from_meshio(meshio_mesh)
+    for call in (lambda: g.faces("bore"), lambda: g.nodes("bore"), lambda: g.elements("web"), lambda: g.nodes("web")):
+        with pytest.raises(ValueError, match="has no cells in this mesh.*one physical group"):
+            call()

@@ -55,13 +55,13 @@ class PhysicalGroups(NamedGroups):
     def elements(self, name: str) -> np.ndarray:
         """The element indices of the physical volume `name` (e.g. a passive region), sorted."""
         self._check(name, 3)
-        return self._elements[name]
+        return self._nonempty(name, self._elements[name])
 
     def faces(self, name: str) -> np.ndarray:
         """The faces of the physical surface `name` as corner-node tuples `(n_faces, 3 or 4)`, each checked to be a
         face on the surface of the mesh (an interface, a clamped face, a loaded face)."""
         self._check(name, 2)
-        faces = self._faces[name]
+        faces = self._nonempty(name, self._faces[name])
         boundary = {tuple(k) for k in boundary_faces(self.mesh)}
         off = np.flatnonzero([tuple(k) not in boundary for k in _face_keys(faces)])
         if off.size:
@@ -80,7 +80,7 @@ class PhysicalGroups(NamedGroups):
         if self.dimensions[name] == 2:
             self.faces(name)
             return tuple(int(n) for n in np.unique(self._face_nodes[name]))
-        return tuple(int(n) for n in np.unique(self.mesh.elements[self._elements[name]]))
+        return tuple(int(n) for n in np.unique(self.mesh.elements[self.elements(name)]))
 
 
 def solid_groups_from_meshio(mesh, orientation: str = "refuse",
