@@ -54,6 +54,11 @@ def main():
     parser.add_argument("--beta-max", type=float, default=32.0)
     parser.add_argument("--beta-every", type=int, default=10, help="steps between doublings of beta")
     parser.add_argument("--rtol", type=float, default=1e-8, help="tolerance of the solves inside the loop")
+    parser.add_argument("--eta-eroded", type=float, default=None,
+                        help="with --eta-dilated: the robust formulation (objective on the eroded design)")
+    parser.add_argument("--eta-dilated", type=float, default=None)
+    parser.add_argument("--robust-objective", default="eroded", choices=("eroded", "blueprint", "dilated", "max"),
+                        help="the design the objective is evaluated on (max: the largest over the three)")
     parser.add_argument("--resume", action="store_true", help="continue the run checkpointed in <out>/run")
     parser.add_argument("--force-resume", action="store_true",
                         help="continue it with other settings (e.g. a higher --beta-max from the checkpoint on)")
@@ -88,7 +93,8 @@ def run(args):
     else:
         filt = fj.DensityFilter(case.design, args.filter_length, scale=(1.0, 1.0))
         filter_m = args.filter_length
-    projection = fj.HeavisideProjection(0.5, x_min=x_min)
+    projection = fj.HeavisideProjection(0.5, x_min=x_min, eta_eroded=args.eta_eroded, eta_dilated=args.eta_dilated,
+                                         objective=args.robust_objective)
     fun = fj.make_objective(case, filter=filt, projection=projection, rtol=args.rtol)
     volume = fj.VolumeConstraint(args.volume, x_min=x_min, filter=filt, projection=projection)
     setup_s = time.perf_counter() - start_all
@@ -119,6 +125,8 @@ def run(args):
     config = {"nx": args.nx, "ny": args.ny, "modes": args.modes, "t1": args.t1, "volume": args.volume,
               "filter_m": filter_m, "beta_start": args.beta_start, "beta_max": args.beta_max,
               "beta_every": args.beta_every, "rtol": args.rtol}
+    if projection.robust:
+        config.update(eta_eroded=args.eta_eroded, eta_dilated=args.eta_dilated, robust_objective=args.robust_objective)
     if args.force_resume:
         # The checkpoint's settings stand for its steps; the new ones (e.g. a higher beta_max) act from it on.
         config = json.loads(str(np.load(args.out / "run" / "checkpoint.npz")["config"]))
@@ -173,6 +181,9 @@ def run(args):
         "grey_history": [float(g) for g in h.grey], "psi_history": [float(v) for v in h.value],
         "change_history": [float(c) for c in h.change],
     }
+    if projection.robust:
+        summary["robust"] = robust_check(case, filt, projection, result.x, beta_last)
+    summary["member_size"] = member_size(layout)
     if args.coarse is not None:
         coarse_layout = np.load(args.coarse / "design.npz")["layout"]
         summary["refinement"] = refinement_check(layout, coarse_layout)
@@ -195,6 +206,42 @@ def run(args):
     ax = fj.plot_history(h)
     ax.figure.savefig(args.out / "convergence.png", dpi=150)
     print(json.dumps({k: v for k, v in summary.items() if not k.endswith("history")}, indent=2))
+
+
+def robust_check(case, filt, projection, x, beta) -> dict:
+    """psi (rtol 1e-10), volume and grey share of the eroded, blueprint and dilated designs of the final `x`: whether
+    the eroded design is the worst case (`psi(eroded) >= psi(blueprint) >= psi(dilated)`), the premise of
+    evaluating the objective on the eroded design only."""
+    out = {}
+    for name, x_phys in zip(("eroded", "blueprint", "dilated"), projection.designs(filt(x), beta)):
+        try:
+            psi = float(fj.objective(case, x_phys, rtol=1e-10, atol=1e-12))
+        except fj.SimulationError as error:  # a design too soft to assemble or to run through the motion
+            psi, out[f"{name}_error"] = float("nan"), str(error)[:200]
+        out[name] = {"psi": psi, "volume": float(np.mean(x_phys)), "grey_share": float(fj.grey_share(x_phys))}
+    psi = [out[name]["psi"] for name in ("eroded", "blueprint", "dilated")]
+    out["eroded_is_worst"] = bool(psi[0] >= psi[1] >= psi[2])
+    out["worst"] = ("eroded", "blueprint", "dilated")[int(np.nanargmax(psi))]
+    return out
+
+
+def member_size(layout) -> dict:
+    """The smallest solid and void feature of the layout thresholded at 0.5, in elements: for k = 1, 2, ... the share
+    of the solid (void) elements that lie in no all-solid (all-void) k x k square (a morphological opening); the
+    largest k with none such is the minimum member (hole) size. The domain's outside counts as void (a flange along
+    the edge is as thin as it is inside the domain; a void reaching the edge is open to the outside)."""
+    from scipy.ndimage import binary_opening
+
+    out = {}
+    for name, mask, pad in (("solid", layout > 0.5, False), ("void", layout <= 0.5, True)):
+        padded = np.pad(mask, 6, constant_values=pad)
+        thin = []
+        for k in range(1, 7):
+            opened = binary_opening(padded, structure=np.ones((k, k), bool))[6:-6, 6:-6]
+            thin.append(float((mask & ~opened).sum() / max(mask.sum(), 1)))
+        out[name] = {"share_not_in_k_square": thin,
+                     "min_size": max([k for k, t in zip(range(1, 7), thin) if t == 0.0], default=0)}
+    return out
 
 
 def _grey_on_edges(layout) -> float:

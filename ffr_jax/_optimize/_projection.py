@@ -29,14 +29,49 @@ class HeavisideProjection(eqx.Module):
 
     `beta` is an argument of `__call__`, not a field, so a loop can raise it without recompiling.
 
+    **Robust formulation (a minimum length scale).** Given `eta_eroded > eta > eta_dilated`, one
+    filtered field makes three designs, `P_beta` at the three thresholds (paper Sect. 4): the
+    *eroded* design (`eta_eroded`: every member thinner by the same offset), the *blueprint*
+    (`eta`) and the *dilated* one (`eta_dilated`: thicker); `designs`
+    returns them, eroded `<=` blueprint `<=` dilated element by element. `__call__` returns the
+    blueprint: it is the design that [`physical_densities`][ffr_jax.physical_densities], the volume,
+    mass and frequency constraints, [`grey_share`][ffr_jax.grey_share] and the plots see, and the
+    design a run reports. The objective of [`make_objective`][ffr_jax.make_objective] (and
+    [`filtered_objective`][ffr_jax.filtered_objective]) is evaluated on the design `objective` names:
+
+    - `"max"`: the paper's min-max, `max(psi(eroded), psi(blueprint), psi(dilated))`, taken as the
+      p-norm of the three values (`p = 16`, within 7 % of the largest, exact gradient; the values
+      must be positive, as the integral objectives of this package are). Three dynamics solves per
+      step. A feature counts only if the design performs with it eroded *and* dilated: a member
+      narrower than about the filter's diameter vanishes from the eroded design, a thin slot closes
+      in the dilated one, so neither is worth keeping. That is the minimum size of members and holes
+      that the plain projection lacks (issue 30: struts narrower than the filter stayed grey at
+      `u ~ eta`).
+    - `"eroded"` (default), `"blueprint"`, `"dilated"`: that one design, one solve per step (the
+      paper's cheap variant). It is the min-max only where the design named is the worst case, as
+      the eroded one is for a stiffness-dominated objective (compliance:
+      `psi(eroded) >= psi(blueprint) >= psi(dilated)`). Not for the slider–crank rod's
+      inertia-loaded `psi`: there the eroded design is the *best* (less mass, less inertia load),
+      and optimising it fills the blueprint up to the volume bound; optimising the dilated design
+      (the worst there) leaves a blueprint too thin to run (both measured in `benchmarks/RESULTS.md`,
+      "Time to a design"). Check the order on the final designs with `designs`.
+
     **Arguments:**
-    - `eta`: threshold in `(0, 1)` (0.5: densities above the middle go solid).
+    - `eta`: threshold in `(0, 1)` (0.5: densities above the middle go solid); the blueprint's.
     - `x_min`: the lower bound of the densities (`case.material.x_min`).
+    - `eta_eroded`, `eta_dilated`: the robust formulation's thresholds, both or neither, with
+      `0 < eta_dilated < eta < eta_eroded < 1` (Wang, Lazarov, Sigmund use 0.3 / 0.5 / 0.7; the
+      wider apart, the larger the minimum member size). `None` (default): the plain projection.
+    - `objective`: with the robust formulation, the design(s) the objective is evaluated on:
+      `"max"`, `"eroded"`, `"blueprint"` or `"dilated"` (see above).
 
     **Example:**
     ```python
     projection = fj.HeavisideProjection(eta=0.5, x_min=case.material.x_min)
     x_phys = projection(filt(x), beta=8.0)
+    robust = fj.HeavisideProjection(0.5, x_min=case.material.x_min, eta_eroded=0.7, eta_dilated=0.3,
+                                    objective="max")
+    eroded, blueprint, dilated = robust.designs(filt(x), beta=8.0)
     ```
 
     !!! cite "Reference"
@@ -46,28 +81,83 @@ class HeavisideProjection(eqx.Module):
 
     eta: float = eqx.field(static=True)
     x_min: float = eqx.field(static=True)
+    eta_eroded: float | None = eqx.field(static=True)
+    eta_dilated: float | None = eqx.field(static=True)
+    objective: str = eqx.field(static=True)
 
-    def __init__(self, eta: float = 0.5, *, x_min: float = 0.01):
+    def __init__(self, eta: float = 0.5, *, x_min: float = 0.01, eta_eroded: float | None = None,
+                 eta_dilated: float | None = None, objective: str = "eroded"):
         if not 0.0 < eta < 1.0:
             raise ValueError(f"The projection threshold eta must lie in (0, 1), got {eta}.")
         if not 0.0 < x_min < 1.0:
             raise ValueError(f"x_min must lie in (0, 1), got {x_min}.")
+        if (eta_eroded is None) != (eta_dilated is None):
+            raise ValueError("The robust formulation needs both thresholds, eta_eroded and eta_dilated (e.g. 0.7 and "
+                             f"0.3 around eta = 0.5), or neither; got eta_eroded={eta_eroded}, "
+                             f"eta_dilated={eta_dilated}.")
+        if eta_eroded is not None and not 0.0 < eta_dilated < eta < eta_eroded < 1.0:
+            raise ValueError(f"The robust formulation needs 0 < eta_dilated < eta < eta_eroded < 1 (the eroded design "
+                             f"thinner, the dilated one thicker than the blueprint), got eta_dilated={eta_dilated}, "
+                             f"eta={eta}, eta_eroded={eta_eroded}; e.g. 0.3, 0.5, 0.7.")
+        if objective not in ROBUST_OBJECTIVES:
+            raise ValueError(f"objective must be one of {ROBUST_OBJECTIVES} (the design the objective is evaluated "
+                             f"on, or 'max': the largest over the three), got {objective!r}.")
+        if objective != "eroded" and eta_eroded is None:
+            raise ValueError(f"objective={objective!r} needs the robust formulation: give eta_eroded and eta_dilated.")
+        self.objective = objective
         self.eta = float(eta)
         self.x_min = float(x_min)
+        self.eta_eroded = None if eta_eroded is None else float(eta_eroded)
+        self.eta_dilated = None if eta_dilated is None else float(eta_dilated)
+
+    @property
+    def robust(self) -> bool:
+        """Whether this is the robust formulation (eroded, blueprint and dilated designs)."""
+        return self.eta_eroded is not None
 
     def __call__(self, x_filtered: Design, beta: Scalar | float) -> Design:
-        """Physical densities `x_min + (1 - x_min) P_beta(u)` of filtered densities `(n_design,)`."""
+        """Physical densities `x_min + (1 - x_min) P_beta(u)` of filtered densities `(n_design,)` (the
+        blueprint, at `eta`)."""
+        return self._project(x_filtered, beta, self.eta)
+
+    def objective_design(self, x_filtered: Design, beta: Scalar | float) -> Design:
+        """The design the objective is evaluated on: in the robust formulation the one `objective` names
+        (`"eroded"`, `"blueprint"` or `"dilated"`), else the blueprint `__call__` returns. `(n_design,)`."""
+        if not self.robust:
+            return self(x_filtered, beta)
+        if self.objective == "max":
+            raise ValueError("objective='max' evaluates the objective on all three designs: use designs().")
+        eta = {"eroded": self.eta_eroded, "blueprint": self.eta, "dilated": self.eta_dilated}[self.objective]
+        return self._project(x_filtered, beta, eta)
+
+    def designs(self, x_filtered: Design, beta: Scalar | float) -> tuple[Design, Design, Design]:
+        """The robust formulation's eroded, blueprint and dilated designs of one filtered field.
+
+        **Arguments:** `x_filtered`: `(n_design,)` filtered densities; `beta`: the sharpness.
+
+        **Returns:** `(eroded, blueprint, dilated)`, each `(n_design,)`, ordered element by element
+        (`P_beta` at a higher threshold is lower).
+        """
+        if not self.robust:
+            raise ValueError("designs() needs the robust formulation: HeavisideProjection(eta, x_min=..., "
+                             "eta_eroded=..., eta_dilated=...).")
+        return tuple(self._project(x_filtered, beta, eta) for eta in (self.eta_eroded, self.eta, self.eta_dilated))
+
+    def _project(self, x_filtered, beta, eta):
         if not is_traced(beta):
             _check_beta(beta, "HeavisideProjection(...)(x, beta)")
         beta = jnp.asarray(beta, dtype=x_filtered.dtype)
         # A traced beta (a schedule's value inside a compiled step): inf or nan would make P_beta NaN.
         beta = error_if(beta, ~(beta > 0.0) | ~jnp.isfinite(beta), BETA_MESSAGE, DesignError)
         u = (x_filtered - self.x_min) / (1.0 - self.x_min)
-        a = jnp.tanh(beta * self.eta)
-        p = (a + jnp.tanh(beta * (u - self.eta))) / (a + jnp.tanh(beta * (1.0 - self.eta)))
+        a = jnp.tanh(beta * eta)
+        p = (a + jnp.tanh(beta * (u - eta))) / (a + jnp.tanh(beta * (1.0 - eta)))
         # Round-off in H x may leave u a hair outside [0, 1]; the bounds are exact.
         return jnp.clip(self.x_min + (1.0 - self.x_min) * p, self.x_min, 1.0)
 
+
+# The designs the robust formulation's objective may be evaluated on, and "max": the largest over the three.
+ROBUST_OBJECTIVES = ("eroded", "blueprint", "dilated", "max")
 
 BETA_MESSAGE = ("The projection sharpness beta must be a finite positive number (at beta = inf the projection "
                 "P_beta is NaN, tanh(inf) / tanh(inf)); continuation schedules stop at a finite beta_max such as 32.")
