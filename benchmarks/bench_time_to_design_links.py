@@ -30,6 +30,10 @@ PYTHONPATH=$PWD nohup python benchmarks/bench_time_to_design_links.py link --mes
 PYTHONPATH=$PWD nohup python benchmarks/bench_time_to_design_links.py two-links --nx 100 --ny 8 --modes 3 --t1 1.0 \
     --filter-length 0.015 --iters 60 > two_links.log 2>&1 &
 ```
+`--eta-eroded 0.7 --eta-dilated 0.3 [--robust-objective max]`: the robust formulation of the projection (eroded,
+blueprint and dilated designs; the blueprint reported; `summary.json` then holds psi of all three); `--beta-max`,
+`--beta-every`: another continuation than the default.
+
 RESULTS.md: "Time to a design", subsections of the link and the two links (written by hand from summary.json).
 """
 
@@ -61,7 +65,8 @@ def build(args):
         filt = {name: fj.DensityFilter(body, args.filter_length, scale=(1.0, 1.0))
                 for name, body in case.design_map.bodies.items()}
         areas = {name: np.asarray(body.domain.design_areas()) for name, body in case.design_map.bodies.items()}
-    projection = fj.HeavisideProjection(0.5, x_min=x_min)
+    projection = fj.HeavisideProjection(0.5, x_min=x_min, eta_eroded=args.eta_eroded, eta_dilated=args.eta_dilated,
+                                         objective=args.robust_objective)
     fun = fj.make_objective(case, filter=filt, projection=projection, rtol=args.rtol, atol=args.atol)
     constraint = fj.VolumeConstraint(args.volume, x_min=x_min, filter=filt, projection=projection)
     x0 = case.initial_design(args.volume if args.example == "link"
@@ -113,6 +118,27 @@ def refinement_difference(fine_case, fine_phys, fine_areas, coarse_dir: pathlib.
     return float(fine_areas @ ((np.asarray(fine_phys) > 0.5) != (stored["x_phys"][nearest] > 0.5)) / fine_areas.sum())
 
 
+def robust_check(case, filt, projection, x, beta, areas, atol) -> dict:
+    """psi (rtol 1e-10), volume and grey share of the eroded, blueprint and dilated designs of the final `x` (dicts
+    by body for the two links): which is the worst case."""
+    if isinstance(x, dict):
+        per_body = {n: projection.designs(filt[n](x[n]), beta) for n in x}
+        designs = [{n: np.asarray(per_body[n][i]) for n in x} for i in range(3)]
+    else:
+        designs = [np.asarray(d) for d in projection.designs(filt(x), beta)]
+    out = {}
+    for name, x_phys in zip(("eroded", "blueprint", "dilated"), designs):
+        try:
+            psi = float(fj.objective(case, x_phys, rtol=1e-10, atol=atol))
+        except fj.SimulationError as error:
+            psi, out[f"{name}_error"] = float("nan"), str(error)[:200]
+        out[name] = {"psi": psi, "volume": area_fraction(x_phys, areas),
+                     "grey_share": float(fj.grey_share(x_phys, areas=areas))}
+    psi = [out[n]["psi"] for n in ("eroded", "blueprint", "dilated")]
+    out["worst"] = ("eroded", "blueprint", "dilated")[int(np.nanargmax(psi))]
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("example", choices=["link", "two-links"])
@@ -128,12 +154,19 @@ def main():
     parser.add_argument("--atol", type=float, default=None,
                         help="absolute tolerance inside the loop (default: link 1e-15, two-links 1e-12)")
     parser.add_argument("--checkpoint-every", type=int, default=5)
+    parser.add_argument("--beta-max", type=float, default=32.0, help="the continuation's last beta (fj's default 32)")
+    parser.add_argument("--beta-every", type=int, default=10, help="steps between doublings of beta (default 10)")
+    parser.add_argument("--eta-eroded", type=float, default=None,
+                        help="with --eta-dilated: the robust formulation of the projection")
+    parser.add_argument("--eta-dilated", type=float, default=None)
+    parser.add_argument("--robust-objective", default="eroded", choices=("eroded", "blueprint", "dilated", "max"))
     parser.add_argument("--refine-of", type=pathlib.Path, default=None,
                         help="a coarser run's OUT folder: compare the thresholded layouts")
     parser.add_argument("--out", type=pathlib.Path, default=None)
     parser.add_argument("--force-resume", action="store_true", help="passed to fj.optimize (a checkpoint of an "
                         "older version of this script, whose stored settings differ)")
     args = parser.parse_args()
+    schedule = fj.beta_continuation(1.0, args.beta_max, every=args.beta_every)
     if args.atol is None:
         args.atol = 1e-15 if args.example == "link" else 1e-12  # link: psi ~ 1e-8, its coordinates ~ 1e-7
     if args.out is None:
@@ -142,6 +175,10 @@ def main():
     # --iters is left out of the stored settings, so the same command with more steps continues a finished run.
     config = {k: v for k, v in vars(args).items() if k not in ("out", "refine_of", "checkpoint_every", "iters",
                                                              "force_resume")}
+    if args.eta_eroded is None and args.beta_max == 32.0 and args.beta_every == 10:
+        # The settings of the runs made before these options (their checkpoints resume unchanged).
+        for key in ("beta_max", "beta_every", "eta_eroded", "eta_dilated", "robust_objective"):
+            config.pop(key)
 
     start_all = time.perf_counter()
     case, filt, projection, fun, constraint, x_min, x0, areas = build(args)
@@ -186,6 +223,7 @@ def main():
     start = time.perf_counter()
     result = fj.optimize(timed_fun, x0, fj.MMA(x_min), constraint, iterations=args.iters, progress=True,
                          directory=args.out, resume=resume, checkpoint_every=args.checkpoint_every, config=config,
+                         beta=schedule,
                          force_resume=args.force_resume)
     session_s = time.perf_counter() - start
     with (args.out / "sessions.jsonl").open("a") as f:
@@ -194,7 +232,7 @@ def main():
     if unravel is not None:
         result = result._replace(x=unravel(result.x))
     h = result.history
-    beta_last = fj.beta_continuation()(h.steps - 1)
+    beta_last = schedule(h.steps - 1)
     x_phys = fj.physical_densities(result.x, filt, projection, beta_last)
     x_phys = {n: np.asarray(v) for n, v in x_phys.items()} if isinstance(x_phys, dict) else np.asarray(x_phys)
 
@@ -236,6 +274,8 @@ def main():
         "load": [s["load_before"] for s in sessions], "machine_cpus": os.cpu_count(),
         "grey_history": [float(g) for g in h.grey], "psi_history": [float(v) for v in h.value],
     }
+    if projection.robust:
+        summary["robust"] = robust_check(case, filt, projection, result.x, beta_last, areas, args.atol)
     if args.refine_of is not None:
         coarse = json.loads((args.refine_of / "summary.json").read_text())["settings"]
         coarse_args = argparse.Namespace(**{**vars(args), **coarse})
