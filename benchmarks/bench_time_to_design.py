@@ -62,6 +62,10 @@ def main():
     parser.add_argument("--resume", action="store_true", help="continue the run checkpointed in <out>/run")
     parser.add_argument("--force-resume", action="store_true",
                         help="continue it with other settings (e.g. a higher --beta-max from the checkpoint on)")
+    parser.add_argument("--start-from", type=pathlib.Path, default=None,
+                        help="a coarser run's folder: start from its design variables (nearest element centroid) "
+                             "instead of the uniform design; with --beta-start at the coarse run's last beta, whether "
+                             "its layout is still optimal on this mesh")
     parser.add_argument("--coarse", type=pathlib.Path, default=None,
                         help="a run's folder on half the elements per direction: the refinement check")
     parser.add_argument("--out", type=pathlib.Path,
@@ -130,7 +134,9 @@ def run(args):
     if args.force_resume:
         # The checkpoint's settings stand for its steps; the new ones (e.g. a higher beta_max) act from it on.
         config = json.loads(str(np.load(args.out / "run" / "checkpoint.npz")["config"]))
-    x0 = case.initial_design(args.volume)
+    x0 = case.initial_design(args.volume) if args.start_from is None else _mapped_design(case, args.start_from)
+    if args.start_from is not None:
+        config["start_from"] = str(args.start_from)
     start = time.perf_counter()
     started.append(start)
     result = fj.optimize(timed_fun, x0, fj.MMA(x_min), volume, iterations=args.iters, progress=True,
@@ -206,6 +212,18 @@ def run(args):
     ax = fj.plot_history(h)
     ax.figure.savefig(args.out / "convergence.png", dpi=150)
     print(json.dumps({k: v for k, v in summary.items() if not k.endswith("history")}, indent=2))
+
+
+def _mapped_design(case, folder):
+    """The design variables of the run in `folder` (another mesh of the same rod) on `case`'s design elements: each
+    takes the value of the nearest coarse design element (by centroid)."""
+    from scipy.spatial import cKDTree
+
+    coarse = json.loads((folder / "summary.json").read_text())
+    coarse_case = fj.cases.slider_crank(coarse["nx"], coarse["ny"], coarse["modes"], coarse["t1"])
+    nearest = cKDTree(np.asarray(coarse_case.design.domain.design_centroids())).query(
+        np.asarray(case.design.domain.design_centroids()))[1]
+    return np.asarray(np.load(folder / "design.npz")["x"])[nearest]
 
 
 def robust_check(case, filt, projection, x, beta) -> dict:
