@@ -57,7 +57,7 @@ def main():
     parser.add_argument("--eta-eroded", type=float, default=None,
                         help="with --eta-dilated: the robust formulation (objective on the eroded design)")
     parser.add_argument("--eta-dilated", type=float, default=None)
-    parser.add_argument("--robust-objective", default="eroded", choices=("eroded", "blueprint", "dilated", "max"),
+    parser.add_argument("--robust-objective", default="max", choices=("eroded", "blueprint", "dilated", "max"),
                         help="the design the objective is evaluated on (max: the largest over the three)")
     parser.add_argument("--resume", action="store_true", help="continue the run checkpointed in <out>/run")
     parser.add_argument("--force-resume", action="store_true",

@@ -159,7 +159,7 @@ def main():
     parser.add_argument("--eta-eroded", type=float, default=None,
                         help="with --eta-dilated: the robust formulation of the projection")
     parser.add_argument("--eta-dilated", type=float, default=None)
-    parser.add_argument("--robust-objective", default="eroded", choices=("eroded", "blueprint", "dilated", "max"))
+    parser.add_argument("--robust-objective", default="max", choices=("eroded", "blueprint", "dilated", "max"))
     parser.add_argument("--refine-of", type=pathlib.Path, default=None,
                         help="a coarser run's OUT folder: compare the thresholded layouts")
     parser.add_argument("--out", type=pathlib.Path, default=None)

@@ -61,8 +61,9 @@ def filtered_objective(fun: Callable,
     `x_phys = P_beta(H x)` and the function is `(x, beta) -> (psi_phys(x_phys), J^T g_phys(x_phys))`,
     `J = diag(P_beta'(H x)) H` (the pullback is `jax.vjp` of the same map that made `x_phys`, so
     value and gradient are consistent). With a robust projection (`eta_eroded`, `eta_dilated` given)
-    `x_phys` is the eroded design, `P_beta` at `eta_eroded` (Wang, Lazarov, Sigmund 2011, the cheap
-    variant of the robust formulation; see [`HeavisideProjection`][]).
+    the value is the p-norm of `psi` over its eroded, blueprint and dilated designs (`objective="max"`,
+    three calls of `fun`), or `psi` of the one design its `objective` names (Wang, Lazarov, Sigmund
+    2011; see [`HeavisideProjection`][]).
 
     **Arguments:**
     - `fun`: `x_phys -> (value, grad)` with `grad` shaped like `x_phys`.
@@ -101,7 +102,7 @@ def filtered_objective(fun: Callable,
             grads.append(pullback(grad)[0])
         return smooth_max(jnp.stack(values), grads)
 
-    return fun_of_worst_design if projection.objective == "max" else fun_of_projected_design
+    return fun_of_worst_design if projection.robust and projection.objective == "max" else fun_of_projected_design
 
 
 # The exponent of the p-norm that stands for the largest of the robust formulation's three objective values: it
@@ -144,8 +145,8 @@ def make_objective(case: Case | OperatingConditions, method: str | AbstractSensi
       its stability limit, e.g. the reference case; else the paper's adjoint with Dopri8).
     - `filter`: a [`DensityFilter`][], a dict of them by body (for a dict design), or `None`.
     - `projection`: a [`HeavisideProjection`][] after the filter, or `None`; with one the
-      function is `fun(x, beta)`, `x_phys = P_beta(H x)` (a robust projection: `psi` of its eroded
-      design, the blueprint's erosion).
+      function is `fun(x, beta)`, `x_phys = P_beta(H x)` (a robust projection: the largest `psi` of its
+      eroded, blueprint and dilated designs, or of the one design its `objective` names).
     - `**kwargs`: passed on to `ffr_jax.value_and_grad`, e.g. `rtol=1e-8, atol=1e-10`.
 
     **Returns:** `fun(x) -> (psi, grad)`, a scalar and an array shaped like `x`.

@@ -39,22 +39,23 @@ class HeavisideProjection(eqx.Module):
     design a run reports. The objective of [`make_objective`][ffr_jax.make_objective] (and
     [`filtered_objective`][ffr_jax.filtered_objective]) is evaluated on the design `objective` names:
 
-    - `"max"`: the paper's min-max, `max(psi(eroded), psi(blueprint), psi(dilated))`, taken as the
-      p-norm of the three values (`p = 16`, within 7 % of the largest, exact gradient; the values
-      must be positive, as the integral objectives of this package are). Three dynamics solves per
-      step. A feature counts only if the design performs with it eroded *and* dilated: a member
-      narrower than about the filter's diameter vanishes from the eroded design, a thin slot closes
-      in the dilated one, so neither is worth keeping. That is the minimum size of members and holes
-      that the plain projection lacks (issue 30: struts narrower than the filter stayed grey at
-      `u ~ eta`).
-    - `"eroded"` (default), `"blueprint"`, `"dilated"`: that one design, one solve per step (the
-      paper's cheap variant). It is the min-max only where the design named is the worst case, as
-      the eroded one is for a stiffness-dominated objective (compliance:
-      `psi(eroded) >= psi(blueprint) >= psi(dilated)`). Not for the slider–crank rod's
-      inertia-loaded `psi`: there the eroded design is the *best* (less mass, less inertia load),
-      and optimising it fills the blueprint up to the volume bound; optimising the dilated design
-      (the worst there) leaves a blueprint too thin to run (both measured in `benchmarks/RESULTS.md`,
-      "Time to a design"). Check the order on the final designs with `designs`.
+    - `"max"` (default): the paper's min-max, `max(psi(eroded), psi(blueprint), psi(dilated))`,
+      taken as the p-norm of the three values (`p = 16`, within 7 % of the largest, exact gradient;
+      the values must be positive, as the integral objectives of this package are). Three dynamics
+      solves per step. A feature counts only if the design performs with it eroded *and* dilated: a
+      member narrower than about the filter's diameter vanishes from the eroded design, a thin slot
+      closes in the dilated one, so neither is worth keeping. That is the minimum size of members
+      and holes that the plain projection lacks (issue 30: struts narrower than the filter stayed
+      grey at `u ~ eta`).
+    - `"eroded"`, `"blueprint"`, `"dilated"`: that one design, one solve per step (the paper's cheap
+      variant). It is the min-max only where the design named is the worst case, as the eroded one
+      is for a stiffness-dominated objective (a static compliance: `psi(eroded) >= psi(blueprint) >=
+      psi(dilated)`). Not for the slider–crank rod's inertia-loaded `psi`: there the eroded design is
+      the *best* (less mass, less inertia load), and optimising it fills the blueprint with material
+      the objective does not see (psi of the blueprint 0.0280 against the min-max's 0.0178 at
+      400 x 24); optimising the dilated design (the worst there) leaves a blueprint too thin to run
+      (`benchmarks/RESULTS.md`, "Time to a design"). Check the order on the final designs with
+      `designs`.
 
     **Arguments:**
     - `eta`: threshold in `(0, 1)` (0.5: densities above the middle go solid); the blueprint's.
@@ -63,14 +64,13 @@ class HeavisideProjection(eqx.Module):
       `0 < eta_dilated < eta < eta_eroded < 1` (Wang, Lazarov, Sigmund use 0.3 / 0.5 / 0.7; the
       wider apart, the larger the minimum member size). `None` (default): the plain projection.
     - `objective`: with the robust formulation, the design(s) the objective is evaluated on:
-      `"max"`, `"eroded"`, `"blueprint"` or `"dilated"` (see above).
+      `"max"` (default), `"eroded"`, `"blueprint"` or `"dilated"` (see above).
 
     **Example:**
     ```python
     projection = fj.HeavisideProjection(eta=0.5, x_min=case.material.x_min)
     x_phys = projection(filt(x), beta=8.0)
-    robust = fj.HeavisideProjection(0.5, x_min=case.material.x_min, eta_eroded=0.7, eta_dilated=0.3,
-                                    objective="max")
+    robust = fj.HeavisideProjection(0.5, x_min=case.material.x_min, eta_eroded=0.7, eta_dilated=0.3)
     eroded, blueprint, dilated = robust.designs(filt(x), beta=8.0)
     ```
 
@@ -86,7 +86,7 @@ class HeavisideProjection(eqx.Module):
     objective: str = eqx.field(static=True)
 
     def __init__(self, eta: float = 0.5, *, x_min: float = 0.01, eta_eroded: float | None = None,
-                 eta_dilated: float | None = None, objective: str = "eroded"):
+                 eta_dilated: float | None = None, objective: str = "max"):
         if not 0.0 < eta < 1.0:
             raise ValueError(f"The projection threshold eta must lie in (0, 1), got {eta}.")
         if not 0.0 < x_min < 1.0:
@@ -102,7 +102,7 @@ class HeavisideProjection(eqx.Module):
         if objective not in ROBUST_OBJECTIVES:
             raise ValueError(f"objective must be one of {ROBUST_OBJECTIVES} (the design the objective is evaluated "
                              f"on, or 'max': the largest over the three), got {objective!r}.")
-        if objective != "eroded" and eta_eroded is None:
+        if objective != "max" and eta_eroded is None:
             raise ValueError(f"objective={objective!r} needs the robust formulation: give eta_eroded and eta_dilated.")
         self.objective = objective
         self.eta = float(eta)
