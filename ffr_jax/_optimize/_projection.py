@@ -46,7 +46,10 @@ class HeavisideProjection(eqx.Module):
       member narrower than about the filter's diameter vanishes from the eroded design, a thin slot
       closes in the dilated one, so neither is worth keeping. That is the minimum size of members
       and holes that the plain projection lacks (issue 30: struts narrower than the filter stayed
-      grey at `u ~ eta`).
+      grey at `u ~ eta`). Where one design dominates the p-norm the others weigh little: on the
+      slider–crank rod the dilated design is the worst, and a member thin in the blueprint and
+      absent from the eroded design costs little (5 % of the 800 x 48 rod's solid lay in no
+      5 mm square, against 0.5 % with `"eroded"`).
     - `"eroded"`, `"blueprint"`, `"dilated"`: that one design, one solve per step (the paper's cheap
       variant). It is the min-max only where the design named is the worst case, as the eroded one
       is for a stiffness-dominated objective (a static compliance: `psi(eroded) >= psi(blueprint) >=
