@@ -281,6 +281,7 @@ def test_unknown_joint_and_quantity_are_refused(rigid):
 # forward solves' noise 10 rtol / 1e-4 = 1e-5 at most; 1e-5 as test_sensitivity (measured 1.8e-9).
 ADJOINT_VS_AUTODIFF = 1e-7
 FINITE_DIFFERENCES = 1e-5
+ADJOINT = fj.Adjoint(rtol=1e-10, atol=1e-12)
 
 
 @pytest.mark.slow
@@ -289,7 +290,7 @@ def test_joint_load_gradient_adjoint_autodiff_fd():
     Slow: the two gradient programs compile for 3-6 minutes on two loaded cores."""
     problem = fj.cases.rigid_slider_crank(0.2, driven=False)
     problem = problem.with_objective(fj.JointLoad(problem, "Revolute(crank,rod)", "force", 2))
-    grads = [fj.value_and_grad(problem, method=m)[1] for m in (fj.Adjoint(rtol=1e-10, atol=1e-12), "autodiff")]
+    grads = [fj.value_and_grad(problem, method=m)[1] for m in (ADJOINT, "autodiff")]
 
     def pick(g):
         return np.array([g.scene.forces[0].stiffness, g.scene.bodies[2].data.mass])
@@ -297,8 +298,9 @@ def test_joint_load_gradient_adjoint_autodiff_fd():
     adjoint, autodiff = (pick(g) for g in grads)
     np.testing.assert_allclose(adjoint, autodiff, rtol=ADJOINT_VS_AUTODIFF, err_msg="adjoint vs autodiff")
 
-    def psi(k):
-        return float(fj.objective(eqx.tree_at(lambda q: q.scene.forces[0].stiffness, problem, jnp.asarray(k))))
+    def psi(k):  # from the adjoint program compiled above (its forward solve), not a forward program of its own
+        changed = eqx.tree_at(lambda q: q.scene.forces[0].stiffness, problem, jnp.asarray(k))
+        return float(fj.value_and_grad(changed, method=ADJOINT)[0])
 
     h = K * 1e-4
     fd = (psi(K + h) - psi(K - h)) / (2 * h)
@@ -312,11 +314,12 @@ def test_driving_torque_design_gradient_adjoint_autodiff_fd():
     case = fj.cases.slider_crank(4, 2, 2, 0.1)
     case = case.with_objective(fj.JointLoad(case, "CrankPin(rod)", "torque", 2))
     x = case.initial_design(0.5)
-    adjoint, autodiff = (np.asarray(fj.value_and_grad(case, x, method=m)[1])
-                         for m in (fj.Adjoint(rtol=1e-10, atol=1e-12), "autodiff"))
+    adjoint, autodiff = (np.asarray(fj.value_and_grad(case, x, method=m)[1]) for m in (ADJOINT, "autodiff"))
     # Bounds as above (measured 1.6e-8 with the adjoint at its default 1e-8).
     np.testing.assert_allclose(adjoint, autodiff, rtol=ADJOINT_VS_AUTODIFF, err_msg="adjoint vs autodiff")
     v = np.linspace(1.0, -1.0, x.size)
     h = 1e-4
-    fd = (float(fj.objective(case, x + h * v)) - float(fj.objective(case, x - h * v))) / (2 * h)
+    # psi from the adjoint program compiled above (its forward solve), not a forward program of its own
+    fd = (float(fj.value_and_grad(case, x + h * v, method=ADJOINT)[0])
+          - float(fj.value_and_grad(case, x - h * v, method=ADJOINT)[0])) / (2 * h)
     assert abs(fd - autodiff @ v) <= FINITE_DIFFERENCES * np.abs(autodiff) @ np.abs(v), "central differences vs autodiff"

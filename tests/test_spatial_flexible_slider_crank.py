@@ -13,10 +13,10 @@ only, and the two solutions by the solver's error propagation of that round-off.
 - gradient: 1e-6 of the largest entry (issue 26): the adjoint integrates backward at rtol 1e-10 as well, and its
   gradient carries the same relative error, ~1e-8, amplified by the adjoint's error growth.
 Slow: compiling the spatial problem's programs takes minutes on the shared 2-core machine (benchmarks/RESULTS.md,
-"Spatial slider–crank"); the planar ones tens of seconds. So the module compiles four programs and shares them:
+"Spatial slider–crank"); the planar ones tens of seconds. So the module compiles three programs and shares them:
 the planar case's adjoint design gradient (its `psi` is the planar reference of both comparisons), and for the spatial
-problem at the design, `problem = case.problem_for(x)`, its objective (every central difference, densities and body
-data alike), its adjoint gradient and its autodiff gradient. The spatial design gradient is the adjoint's scene
+problem at the design, `problem = case.problem_for(x)`, its adjoint gradient (whose `psi` serves every central
+difference, densities and body data alike) and its autodiff gradient. The spatial design gradient is the adjoint's scene
 gradient pulled back through `p(x)` by one VJP: the composition `fj.value_and_grad(case, x)` performs
 (`AbstractSensitivity.value_and_grad_design`), here without compiling it as a fifth program.
 """
@@ -69,8 +69,10 @@ def spatial_problem(cases):
 
 
 def _objective(problem):
-    """`psi` of a spatial problem: one compiled program for every problem of the same structure and shapes."""
-    return fj.objective(problem, rtol=RTOL, atol=ATOL)
+    """`psi` of a spatial problem, from the adjoint program `scene_gradient` compiled (its forward solve, the same
+    tolerances): every central difference runs that one program instead of a forward program of its own (one
+    spatial compile less; the ten backward solves cost seconds)."""
+    return fj.value_and_grad(problem, method="adjoint", rtol=RTOL, atol=ATOL)[0]
 
 
 @pytest.fixture(scope="module")
