@@ -31,8 +31,8 @@ def physical_densities(x, filter: DensityFilter | StackedFilter | dict[str, Dens
 
 
 def _objective_densities(x, filter, projection, beta):
-    """The densities the objective sees: [`physical_densities`][], except that a robust projection gives its
-    eroded design (`HeavisideProjection.objective_design`)."""
+    """The densities the objective sees: [`physical_densities`][], except that a robust projection gives the
+    one design its `objective` names (`HeavisideProjection.objective_design`: eroded, blueprint or dilated)."""
     return _projected(x, filter, projection, beta, lambda u: projection.objective_design(u, beta))
 
 
