@@ -79,6 +79,7 @@ def optimize_options(settings: dict, args, directory: Path, resume: bool) -> Non
         _checks.positive(settings["beta_max"], "--beta-max")
         _checks.integer(settings["beta_every"], "--beta-every", 1)
         _checks.in_interval(settings["eta"], "--projection-eta", 0.0, 1.0, low_open=True, high_open=True)
+    robust_options(settings)
     _checks.integer(args.iters, "--iters", 0)
     _checks.integer(args.checkpoint_every, "--checkpoint-every", 1)
     _checks.output_directory(directory, "--resume" if resume else "--out")
@@ -89,6 +90,29 @@ def optimize_options(settings: dict, args, directory: Path, resume: bool) -> Non
     if not resume and (directory / "checkpoint.npz").exists():
         raise ValueError(f"--out {directory} already holds a run (checkpoint.npz); continue it with --resume "
                          f"{directory}, or choose another directory.")
+
+
+def robust_options(settings: dict) -> tuple | None:
+    """`(eta_eroded, eta_dilated, objective)` of the robust projection that `--eta-eroded`, `--eta-dilated` and
+    `--robust-objective` ask for, or `None` (the plain projection), checked by `fj.HeavisideProjection`'s own
+    rule (its message, after the options as given), so that the shell and Python refuse the same thresholds."""
+    from .._optimize._projection import HeavisideProjection
+
+    eroded, dilated = settings.get("eta_eroded"), settings.get("eta_dilated")
+    objective = settings.get("robust_objective", "max")
+    if eroded is None and dilated is None and objective == "max":
+        return None
+    given = " ".join(f"--{key.replace('_', '-')} {settings.get(key)}"
+                     for key in ("eta_eroded", "eta_dilated", "robust_objective")
+                     if settings.get(key) not in (None, "max"))
+    try:
+        for value, option in ((eroded, "--eta-eroded"), (dilated, "--eta-dilated")):
+            if value is not None:
+                _checks.number(value, option)
+        HeavisideProjection(settings["eta"], x_min=X_MIN, eta_eroded=eroded, eta_dilated=dilated, objective=objective)
+    except ValueError as err:
+        raise ValueError(f"{given}: {err}") from None
+    return float(eroded), float(dilated), objective
 
 
 def finite_record(record: dict, where: str) -> dict:

@@ -9,12 +9,12 @@ import numpy as np
 
 from .._api import METHODS
 from .._checks import in_interval, number
-from ._cli_checks import optimize_options
+from ._cli_checks import optimize_options, robust_options
 from ._cli_scenes import SCENES, USER_CASE_HELP, case_name, describe, is_user_case, make_case, scene_settings
 from ._checkpoint import load_checkpoint
 from ._driver import CHECKPOINT, optimize
 from .._optimize._mma import DEFAULT_MOVE
-from .._optimize._projection import DEFAULT_BETA_EVERY, DEFAULT_BETA_MAX, DEFAULT_BETA_START
+from .._optimize._projection import DEFAULT_BETA_EVERY, DEFAULT_BETA_MAX, DEFAULT_BETA_START, ROBUST_OBJECTIVES
 
 # Settings that define a run: stored in its checkpoints, taken from there on --resume.
 _DEFAULTS = {
@@ -40,6 +40,10 @@ _DEFAULTS = {
     "beta_max": DEFAULT_BETA_MAX,
     "beta_every": DEFAULT_BETA_EVERY,
     "eta": 0.5,
+    # The robust formulation of the projection (fj.HeavisideProjection's eta_eroded, eta_dilated, objective).
+    "eta_eroded": None,
+    "eta_dilated": None,
+    "robust_objective": "max",
     "volume_per_body": None,
 }
 # The crank–rocker whose coupler and rocker are both designed (issue 14): its own mesh and run defaults.
@@ -99,6 +103,18 @@ def add_optimize_parser(sub) -> None:
     p.add_argument("--beta-max", type=float, help="largest projection sharpness (default 32)")
     p.add_argument("--beta-every", type=int, help="steps between doublings of beta (default 10)")
     p.add_argument("--projection-eta", dest="eta", type=float, help="projection threshold eta (default 0.5)")
+    p.add_argument("--eta-eroded", type=float, metavar="ETA_E",
+                   help="with --eta-dilated: the robust formulation of the projection (Wang, Lazarov, Sigmund 2011; "
+                        "fj.HeavisideProjection's eta_eroded), a minimum member size: the filtered field is projected "
+                        "at three thresholds, 0 < eta_dilated < eta < eta_eroded < 1 (e.g. 0.3 / 0.5 / 0.7), into an "
+                        "eroded, a blueprint and a dilated design; the blueprint is the design reported, constrained "
+                        "and drawn. Needs the projection (--optimizer mma, or --projection-beta > 0)")
+    p.add_argument("--eta-dilated", type=float, metavar="ETA_D",
+                   help="the robust formulation's lower threshold (with --eta-eroded)")
+    p.add_argument("--robust-objective", choices=ROBUST_OBJECTIVES,
+                   help="with --eta-eroded/--eta-dilated: the design(s) the objective is evaluated on; max (default): "
+                        "the min-max over the three designs (their p-norm, three solves per step), or one design "
+                        "(one solve per step; the min-max only where that design is the worst case)")
     p.add_argument("--method", choices=sorted(METHODS),
                    help="sensitivity method (default adjoint)")
     p.add_argument("--out", metavar="DIR", help="output directory of a new run (default optimize-<case>)")
@@ -185,8 +201,10 @@ def _default_beta(s: dict, stored: set, resume: bool) -> float:
 
 @functools.cache
 def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | None, method: str,
-             rtol: float, atol: float, filter_length: float | None = None):
+             rtol: float, atol: float, filter_length: float | None = None, robust: tuple | None = None):
     """`(case, filter, projection, objective)` of a setting, built once per process.
+
+    `robust`: `(eta_eroded, eta_dilated, objective)` of the robust projection, or `None` (the plain one).
 
     Runs in one process with the same case and objective settings (tests, notebooks, a resumed run
     after a finished one) share the objective function, and so its compiled program (see
@@ -208,7 +226,9 @@ def _problem(scene: str, geometry: tuple, filter_radius: float, eta: float | Non
     else:
         filt = (DensityFilter(case.design, filter_radius) if filter_length is None
                 else DensityFilter(case.design, filter_length, scale=(1.0, 1.0)))
-    projection = None if eta is None else HeavisideProjection(eta, x_min=case.material.x_min)
+    eroded, dilated, objective = (None, None, "max") if robust is None else robust
+    projection = None if eta is None else HeavisideProjection(eta, x_min=case.material.x_min, eta_eroded=eroded,
+                                                              eta_dilated=dilated, objective=objective)
     fun = make_objective(case, method, filter=filt, projection=projection, rtol=rtol, atol=atol)
     return case, filt, projection, fun
 
@@ -271,6 +291,11 @@ def _run_command(args: argparse.Namespace) -> int:
     s.update(scene_settings(s["case"], s))
     s["beta"] = _default_beta(s, stored, args.resume is not None)
     optimize_options(s, args, directory, resume=args.resume is not None)
+    robust = robust_options(s)
+    if robust is not None and s["beta"] == 0.0:
+        raise ValueError("--eta-eroded/--eta-dilated: the robust formulation is a form of the projection, and this run "
+                         f"has none ({s['optimizer']} without --projection-beta, or --projection-beta 0); give "
+                         "--projection-beta 1 (the continuation) or --optimizer mma (projects by default).")
     if s["filter_length"] is not None:
         in_interval(s["filter_length"], "--filter-length", 0.0, float("inf"),
                     advice="It is the filter radius in m (0 = no filter).")
@@ -284,7 +309,8 @@ def _run_command(args: argparse.Namespace) -> int:
     case, filt, projection, fun = _problem(s["case"], geometry, float(s["filter_radius"]),
                                            float(s["eta"]) if s["beta"] > 0.0 else None, s["method"],
                                            float(s["rtol"]), float(s["atol"]),
-                                           None if s["filter_length"] is None else float(s["filter_length"]))
+                                           None if s["filter_length"] is None else float(s["filter_length"]),
+                                           robust)
     beta = None
     if s["beta"] > 0.0:
         beta = beta_continuation(s["beta"], max(s["beta_max"], s["beta"]), every=s["beta_every"])
@@ -304,6 +330,9 @@ def _run_command(args: argparse.Namespace) -> int:
     else:
         optimizer = MMA(case.material.x_min, 1.0, move=s["mma_move"])
     projected = "" if beta is None else f", Heaviside projection beta {s['beta']} -> {s['beta_max']} (x2 every {s['beta_every']})"
+    if robust is not None:
+        projected += (f", robust: eroded / blueprint / dilated at eta {robust[0]:g} / {s['eta']:g} / {robust[1]:g}, "
+                      f"objective {robust[2]}")
     bounds = "".join(f", {c.name} {'>=' if isinstance(c, FrequencyConstraint) else '<='} "
                      f"{c.minimum if isinstance(c, FrequencyConstraint) else c.bound:g}" for c in constraints[1:])
     radius = (f"filter radius {s['filter_radius']}" if s["filter_length"] is None
@@ -363,8 +392,8 @@ def _run_two_links(args: argparse.Namespace, directory: Path, s: dict, config: d
     from .._optimize._pytree import OnBody
     from .._optimize._volume import VolumeConstraint
 
-    unsupported = [f"--{key.replace('_', '-')}" for key in ("frequency_min", "mass_max", "beta", "filter_length")
-                   if s[key] not in (None, 0.0)]
+    unsupported = [f"--{key.replace('_', '-')}" for key in ("frequency_min", "mass_max", "beta", "filter_length",
+                                                            "eta_eroded", "eta_dilated") if s[key] not in (None, 0.0)]
     if s["optimizer"] != "mma":
         unsupported.append(f"--optimizer {s['optimizer']} (a dict design needs mma)")
     if unsupported:
