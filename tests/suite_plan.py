@@ -19,7 +19,7 @@ within its 5-minute budget on a fresh 2-core machine. Read by `conftest.py`."""
 # programs, the stress and torque gradients; minutes each on one worker) come first, so that the rest fills the
 # other worker around them instead of both waiting for them at the end (the CI of stop 34 ran past its 90-minute cap
 # with them handed out last).
-SHARED_PROGRAMS = ("test_sensitivity", "test_hard_cases", "test_adjoint_quadrature", "test_cacheable")
+SHARED_PROGRAMS = ("test_sensitivity", "test_hard_cases", "test_adjoint_quadrature", "test_cacheable", "test_stiff_route")
 LONGEST_FIRST = ("test_spatial_flexible_slider_crank", "test_stress_objective", "family", "test_problem", "test_two_links", "test_notebooks", "test_design_map", "test_conditions",
                   "test_design_modes", "test_dynamics", "test_spatial_gradient", "test_optimize", "test_io", "test_outputs_any_mesh", "test_cli_user_case", "test_optimize_defaults",
                   "test_design_invariant",

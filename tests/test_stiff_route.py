@@ -3,8 +3,11 @@ psi and design gradient of the explicit route (Dopri8) for every gradient method
 guard (`check_gradient`, `value_and_grad(..., check=True)`) tells a wrong gradient from a right one
 (issue 15).
 
-One small slider-crank (10 x 2 mesh, 3 modes, t1 = 0.2 s) and one design; every program is
-compiled once in a module fixture.
+The family member of `helpers.small_case()` (12 x 2 mesh, 4 modes, t1 = 0.15 s with a 0.05 s crank run-up) and one
+random design; the explicit reference is autodiff through Dopri8 at the paper's tolerances, the very program
+tests/test_sensitivity.py compiles for the family (a plain `fj.value_and_grad` call, compiled once per process and
+structure): this module runs in the family's pytest-xdist group (tests/suite_plan.py), so the reference costs no
+compile of its own (it cost 47 s of the default suite's worker time when this module built its own case).
 """
 
 import diffrax
@@ -39,7 +42,7 @@ GRADIENT_AGREE = {"adjoint": 1e-6, "autodiff": 1e-6, "backsolve": 1e-5, "discret
 
 @pytest.fixture(scope="module")
 def case():
-    return small_case(10, 2, 3, 0.2)
+    return small_case()
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +52,8 @@ def x(case):
 
 @pytest.fixture(scope="module")
 def explicit(case, x):
-    """`(psi, grad)` by autodiff through Dopri8 (the explicit route)."""
+    """`(psi, grad)` by autodiff through Dopri8 (the explicit route): the family's autodiff program, shared with
+    tests/test_sensitivity.py (same call, same tolerances)."""
     psi, grad = fj.value_and_grad(case, x, "autodiff", rtol=RTOL, atol=ATOL)
     return float(psi), np.asarray(grad)
 
