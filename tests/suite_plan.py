@@ -6,7 +6,8 @@ within its 5-minute budget on a fresh 2-core machine. Read by `conftest.py`."""
 # `pyproject.toml` runs the suite on two workers with `--dist loadgroup`: every test carries an
 # `xdist_group`, and a group runs whole on one worker, so that its module-scoped fixtures and the
 # programs compiled in `helpers.py` are built once. The modules that run the family's shared
-# programs (`helpers.adjoint_value_and_grad`, `helpers.tight_objective`) form one group; every other
+# programs (`helpers.adjoint_value_and_grad`, `helpers.tight_objective`, the family's plain autodiff call of
+# test_sensitivity and test_stiff_route) form one group; every other
 # module is its own group. Groups are handed out longest first (measured cold-cache time on two
 # cores, largest first), which keeps the two workers evenly loaded; new modules go last.
 # (`test_adjoint_quadrature` runs the family member's own solves, not the shared programs, but builds the
@@ -80,6 +81,14 @@ SLOW_FOR_THE_BUDGET = (
     "tests/test_solvers.py::test_psi_of_a_small_slider_crank_agrees_with_dopri8",  # (14 s); Rodas orders stay
     "tests/test_simulation_errors.py::test_partition_regular_away_from_the_dead_point",  # (13 s); the dead-point rows stay
     "tests/test_stresses.py::test_stresses_along_the_motion_refuse_a_rigid_body_index",  # (7 s); the stress checks stay
+    # Fifth cut: 361.2 s with 649 tests (fresh-test at b50bccb, idle machine), after the stiff route's reference became
+    # the family's autodiff program (-47 worker-s); a run of the default suite with --durations (two workers, one
+    # core shared with a pinned benchmark) gave the worker-seconds in brackets:
+    "tests/test_accelerations_derivative.py::test_custom_derivative_of_accelerations_equals_the_direct_one[unrolled]",
+    # (32 s); every gradient check of the default suite runs through that derivative (adjoint vs autodiff vs FD)
+    "tests/test_effects.py::test_geometric_stiffening_off_is_not_traced",  # (15 s); gravity, damping off: stay
+    "tests/test_xla_flags.py::test_a_setting_of_the_user_is_kept",  # (8.5 s; two fresh processes)
+    "tests/test_xla_flags.py::test_the_guard_after_jax_started_warns_that_it_is_not_in_effect",  # (7.4 s); the guard stays
 )
 
 
