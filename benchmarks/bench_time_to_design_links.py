@@ -32,7 +32,9 @@ PYTHONPATH=$PWD nohup python benchmarks/bench_time_to_design_links.py two-links 
 ```
 `--eta-eroded 0.7 --eta-dilated 0.3 [--robust-objective max]`: the robust formulation of the projection (eroded,
 blueprint and dilated designs; the blueprint reported; `summary.json` then holds psi of all three); `--beta-max`,
-`--beta-every`: another continuation than the default.
+`--beta-every`: another continuation than the default; `--beta-start B --start-from DIR`: start from another run's
+design variables (DIR, the same example on any mesh: each element takes the nearest element's value by centroid)
+at beta B, e.g. the coarse run's last beta: whether its layout is still optimal on this mesh.
 
 RESULTS.md: "Time to a design", subsections of the link and the two links (written by hand from summary.json).
 """
@@ -102,20 +104,55 @@ def centroids(case):
     return np.asarray(case.design.domain.design_centroids())
 
 
-def refinement_difference(fine_case, fine_phys, fine_areas, coarse_dir: pathlib.Path, coarse_args) -> float:
-    """Area share where the fine and the coarse design, thresholded at 0.5, differ (nearest coarse centroid)."""
+def refinement_difference(fine_case, fine_phys, fine_areas, coarse_dir: pathlib.Path, coarse_args):
+    """Area share where the fine and the coarse design, thresholded at 0.5, differ (nearest coarse centroid).
+
+    Returns `(share, details)`: `details` (two links, the rods' regular meshes) also holds the share of the area
+    that differs outside one coarse element of the coarse layout's edges (there a member or hole moved, appeared or
+    vanished; inside it an edge sits elsewhere by up to the coarse resolution, as in `bench_time_to_design.py`'s
+    `refinement_check`) and `{name: differing (0/1)}` for a picture.
+    """
     from scipy.spatial import cKDTree
 
     coarse_case = build(coarse_args)[0]
     stored = np.load(coarse_dir / "design.npz")
     fine_c, coarse_c = centroids(fine_case), centroids(coarse_case)
     if isinstance(fine_phys, dict):
-        differ = sum(fine_areas[n] @ ((np.asarray(fine_phys[n]) > 0.5)
-                                     != (stored[f"x_phys_{n}"][cKDTree(coarse_c[n]).query(fine_c[n])[1]] > 0.5))
-                     for n in fine_phys)
-        return float(differ / sum(a.sum() for a in fine_areas.values()))
+        total = sum(a.sum() for a in fine_areas.values())
+        differ, off_edges, band_area, maps = 0.0, 0.0, 0.0, {}
+        for n in fine_phys:
+            mapped = stored[f"x_phys_{n}"][cKDTree(coarse_c[n]).query(fine_c[n])[1]] > 0.5
+            d = (np.asarray(fine_phys[n]) > 0.5) != mapped
+            # The coarse element's size along each axis; within one of it (Chebyshev, scaled) of a fine element
+            # lie both coarse solid and coarse void: the edge band.
+            size = np.array([np.diff(np.unique(np.round(coarse_c[n][:, k], 12))).min() for k in range(2)])
+            scaled = fine_c[n] / size
+            neighbours = cKDTree(scaled).query_ball_point(scaled, r=1.0 + 1e-9, p=np.inf)
+            band = np.array([mapped[i].any() and not mapped[i].all() for i in map(np.asarray, neighbours)])
+            differ += fine_areas[n] @ d
+            off_edges += fine_areas[n] @ (d & ~band)
+            band_area += fine_areas[n] @ band
+            maps[n] = d.astype(float)
+        return float(differ / total), {"area_differing_off_edges": float(off_edges / total),
+                                       "edge_band_area": float(band_area / total), "maps": maps}
     nearest = cKDTree(coarse_c).query(fine_c)[1]
-    return float(fine_areas @ ((np.asarray(fine_phys) > 0.5) != (stored["x_phys"][nearest] > 0.5)) / fine_areas.sum())
+    return (float(fine_areas @ ((np.asarray(fine_phys) > 0.5) != (stored["x_phys"][nearest] > 0.5))
+                  / fine_areas.sum()), {})
+
+
+def mapped_design(case, folder: pathlib.Path, args):
+    """The design variables of the run in `folder` (the same example, another mesh) on `case`'s design elements,
+    flattened as `x0` is: each element takes the value of the nearest element of that run (by centroid)."""
+    from jax.flatten_util import ravel_pytree
+    from scipy.spatial import cKDTree
+
+    other = json.loads((folder / "summary.json").read_text())["settings"]
+    other_case = build(argparse.Namespace(**{**vars(args), **other, "start_from": None}))[0]
+    stored = np.load(folder / "design.npz")
+    here, there = centroids(case), centroids(other_case)
+    if isinstance(here, dict):
+        return {n: np.asarray(stored[f"x_{n}"])[cKDTree(there[n]).query(here[n])[1]] for n in here}
+    return np.asarray(stored["x"])[cKDTree(there).query(here)[1]]
 
 
 def robust_check(case, filt, projection, x, beta, areas, atol) -> dict:
@@ -154,6 +191,9 @@ def main():
     parser.add_argument("--atol", type=float, default=None,
                         help="absolute tolerance inside the loop (default: link 1e-15, two-links 1e-12)")
     parser.add_argument("--checkpoint-every", type=int, default=5)
+    parser.add_argument("--beta-start", type=float, default=1.0, help="the continuation's first beta (default 1)")
+    parser.add_argument("--start-from", type=pathlib.Path, default=None,
+                        help="another run's OUT folder (same example, any mesh): start from its design variables")
     parser.add_argument("--beta-max", type=float, default=32.0, help="the continuation's last beta (fj's default 32)")
     parser.add_argument("--beta-every", type=int, default=10, help="steps between doublings of beta (default 10)")
     parser.add_argument("--eta-eroded", type=float, default=None,
@@ -166,7 +206,7 @@ def main():
     parser.add_argument("--force-resume", action="store_true", help="passed to fj.optimize (a checkpoint of an "
                         "older version of this script, whose stored settings differ)")
     args = parser.parse_args()
-    schedule = fj.beta_continuation(1.0, args.beta_max, every=args.beta_every)
+    schedule = fj.beta_continuation(args.beta_start, args.beta_max, every=args.beta_every)
     if args.atol is None:
         args.atol = 1e-15 if args.example == "link" else 1e-12  # link: psi ~ 1e-8, its coordinates ~ 1e-7
     if args.out is None:
@@ -179,9 +219,16 @@ def main():
         # The settings of the runs made before these options (their checkpoints resume unchanged).
         for key in ("beta_max", "beta_every", "eta_eroded", "eta_dilated", "robust_objective"):
             config.pop(key)
+    for key, default in (("beta_start", 1.0), ("start_from", None)):  # runs made before these options resume
+        if config[key] == default:
+            config.pop(key)
+    if args.start_from is not None:
+        config["start_from"] = str(args.start_from)
 
     start_all = time.perf_counter()
     case, filt, projection, fun, constraint, x_min, x0, areas = build(args)
+    if args.start_from is not None:
+        x0 = mapped_design(case, args.start_from, args)
     setup_s = time.perf_counter() - start_all
     session = time.time()
     calls_file = args.out / "calls.jsonl"
@@ -280,8 +327,15 @@ def main():
         coarse = json.loads((args.refine_of / "summary.json").read_text())["settings"]
         coarse_args = argparse.Namespace(**{**vars(args), **coarse})
         summary["refinement_of"] = str(args.refine_of)
-        summary["thresholded_layouts_differ_area_share"] = refinement_difference(case, x_phys, areas, args.refine_of,
-                                                                                  coarse_args)
+        share, details = refinement_difference(case, x_phys, areas, args.refine_of, coarse_args)
+        summary["thresholded_layouts_differ_area_share"] = share
+        maps = details.pop("maps", None)
+        summary.update(details)
+        if maps is not None:
+            fj.plot_designs(case, {n: np.where(m > 0, 1.0, x_min) for n, m in maps.items()},
+                            title=f"thresholded at 0.5, differing from {args.refine_of.name}: {100 * share:.1f} % "
+                                  f"of the area, {100 * details['area_differing_off_edges']:.1f} % off the coarse "
+                                  "edges").savefig(args.out / "refinement.png", dpi=120)
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
     if isinstance(x_phys, dict):
         np.savez(args.out / "design.npz", **{f"x_{n}": np.asarray(result.x[n]) for n in x_phys},
