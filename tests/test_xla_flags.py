@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from ffr_jax._dynamics._xla_flags import SCHEDULER_OPTION, program_options
+from ffr_jax._dynamics._xla_flags import FUSION_OPTION, SCHEDULER_OPTION, program_options
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -90,9 +90,11 @@ def test_batched_sharded_map_warns_without_the_guard():
     assert _run(program, "--xla_cpu_enable_concurrency_optimized_scheduler=false", timeout=120).stdout.split() == ["False"]
 
 
-def test_program_options_turn_the_cpu_scheduler_off_unless_the_user_set_it(monkeypatch):
+def test_program_options_turn_the_scheduler_and_fusion_emitters_off_unless_the_user_set_them(monkeypatch):
     monkeypatch.delenv("XLA_FLAGS", raising=False)
-    assert program_options("cpu") == {SCHEDULER_OPTION: False}
+    assert program_options("cpu") == {SCHEDULER_OPTION: False, FUSION_OPTION: False}
     assert program_options("gpu") == {} and program_options("cuda") == {}
-    monkeypatch.setenv("XLA_FLAGS", f"--{SCHEDULER_OPTION}=true")
+    monkeypatch.setenv("XLA_FLAGS", f"--{SCHEDULER_OPTION}=true --{FUSION_OPTION}=true")
     assert program_options("cpu") == {}, "a setting of the user's is kept"
+    monkeypatch.setenv("XLA_FLAGS", f"--{SCHEDULER_OPTION}=true")
+    assert program_options("cpu") == {FUSION_OPTION: False}, "each option on its own"

@@ -25,21 +25,49 @@ modal analyses in programs of their own sets it before starting Python:
 `XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=false`.
 """
 
+import functools
 import os
 import warnings
 
 
 DEADLOCK_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
 SCHEDULER_OPTION = "xla_cpu_enable_concurrency_optimized_scheduler"
+# XLA's CPU fusion emitters (the MLIR-based code generator, on by default in jaxlib 0.10) spend most of a first
+# call's compile on the package's programs: long chains of tiny operations, thousands of small fusions. With the
+# older emitters the reference gradient's first call (default route, one core, empty cache) took 40.5 and 42.5 s
+# against 94.2 and 61.5 s (XLA 35.6 / 35.4 s against 85.7 / 57.7 s), its later calls 1.93-2.00 s against
+# 2.12-2.13 s, the same psi and the gradient to the last digit or one unit in it (benchmarks/RESULTS.md,
+# "Compile time"). So the package's own programs are compiled with them off, unless the user's XLA_FLAGS say.
+FUSION_OPTION = "xla_cpu_use_fusion_emitters"
+
+
+@functools.cache
+def _known_option(name: str, value: bool) -> bool:
+    """Whether this jaxlib's CPU compiler takes the option `name` (a later XLA may drop it): a scalar program
+    compiled with it, once per process."""
+    import jax
+
+    try:
+        jax.jit(lambda: 0.0).lower().compile({name: value})
+    except Exception:  # noqa: BLE001 — an unknown or refused option: the programs compile without it
+        return False
+    return True
 
 
 def program_options(platform: str) -> dict[str, bool]:
     """XLA options for a program the package compiles itself on `platform` (`Lowered.compile`'s
-    `compiler_options`): on CPU the concurrency-optimised scheduler off (module docstring), unless the
+    `compiler_options`): on CPU the concurrency-optimised scheduler off (module docstring) and the older
+    fusion emitters (`FUSION_OPTION`: less than half the compile time, run time unchanged), each unless the
     user's `XLA_FLAGS` set that option either way; none elsewhere."""
-    if platform != "cpu" or SCHEDULER_OPTION in os.environ.get("XLA_FLAGS", ""):
+    if platform != "cpu":
         return {}
-    return {SCHEDULER_OPTION: False}
+    flags = os.environ.get("XLA_FLAGS", "")
+    options = {}
+    if SCHEDULER_OPTION not in flags:
+        options[SCHEDULER_OPTION] = False
+    if FUSION_OPTION not in flags and _known_option(FUSION_OPTION, False):
+        options[FUSION_OPTION] = False
+    return options
 
 
 def add_flag(flag: str) -> bool:
