@@ -34,10 +34,10 @@ DEADLOCK_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
 SCHEDULER_OPTION = "xla_cpu_enable_concurrency_optimized_scheduler"
 # XLA's CPU fusion emitters (the MLIR-based code generator, on by default in jaxlib 0.10) spend most of a first
 # call's compile on the package's programs: long chains of tiny operations, thousands of small fusions. With the
-# older emitters the reference gradient's first call (default route, one core, empty cache) took 40.5 and 42.5 s
-# against 94.2 and 61.5 s (XLA 35.6 / 35.4 s against 85.7 / 57.7 s), its later calls 1.93-2.00 s against
-# 2.12-2.13 s, the same psi and the gradient to the last digit or one unit in it (benchmarks/RESULTS.md,
-# "Compile time"). So the package's own programs are compiled with them off, unless the user's XLA_FLAGS say.
+# older emitters XLA's part of a first call was 24-39 % shorter on every shipped case (the reference gradient's
+# 56.8 -> 34.5 s on one core), later calls as fast or faster, the numbers equal to round-off (benchmarks/RESULTS.md,
+# "Compile time with XLA's older CPU fusion emitters"). So the package's own programs are compiled with them off,
+# unless the user's XLA_FLAGS say otherwise.
 FUSION_OPTION = "xla_cpu_use_fusion_emitters"
 
 

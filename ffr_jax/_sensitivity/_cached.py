@@ -175,7 +175,8 @@ def _program_key(static, treedef, leaves, options) -> str | None:
 
 def _options() -> dict[str, bool]:
     """XLA options of the kept programs on this platform (`_dynamics/_xla_flags.py`: on CPU the
-    concurrency-optimised scheduler off, which slows their long chains of tiny operations down)."""
+    concurrency-optimised scheduler off, which slows their long chains of tiny operations down, and the older
+    fusion emitters, which compile them in less time)."""
     return program_options(jax.default_backend())
 
 
