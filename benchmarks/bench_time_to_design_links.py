@@ -333,7 +333,7 @@ def main():
         summary.update(details)
         if maps is not None:
             fj.plot_designs(case, {n: np.where(m > 0, 1.0, x_min) for n, m in maps.items()},
-                            title=f"thresholded at 0.5, differing from {args.refine_of.name}: {100 * share:.1f} % "
+                            title=f"thresholded at 0.5, differing from\n{args.refine_of.name}: {100 * share:.1f} % "
                                   f"of the area, {100 * details['area_differing_off_edges']:.1f} % off the coarse "
                                   "edges").savefig(args.out / "refinement.png", dpi=120)
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
