@@ -191,6 +191,7 @@ def main():
     parser.add_argument("--atol", type=float, default=None,
                         help="absolute tolerance inside the loop (default: link 1e-15, two-links 1e-12)")
     parser.add_argument("--checkpoint-every", type=int, default=5)
+    parser.add_argument("--mma-move", type=float, default=0.2, help="fj.MMA's move limit (default 0.2, its default)")
     parser.add_argument("--beta-start", type=float, default=1.0, help="the continuation's first beta (default 1)")
     parser.add_argument("--start-from", type=pathlib.Path, default=None,
                         help="another run's OUT folder (same example, any mesh): start from its design variables")
@@ -219,7 +220,7 @@ def main():
         # The settings of the runs made before these options (their checkpoints resume unchanged).
         for key in ("beta_max", "beta_every", "eta_eroded", "eta_dilated", "robust_objective"):
             config.pop(key)
-    for key, default in (("beta_start", 1.0), ("start_from", None)):  # runs made before these options resume
+    for key, default in (("beta_start", 1.0), ("start_from", None), ("mma_move", 0.2)):  # runs made before these options resume
         if config[key] == default:
             config.pop(key)
     if args.start_from is not None:
@@ -268,7 +269,7 @@ def main():
     resume = (args.out / "checkpoint.npz").exists()
     load_before = os.getloadavg()
     start = time.perf_counter()
-    result = fj.optimize(timed_fun, x0, fj.MMA(x_min), constraint, iterations=args.iters, progress=True,
+    result = fj.optimize(timed_fun, x0, fj.MMA(x_min, move=args.mma_move), constraint, iterations=args.iters, progress=True,
                          directory=args.out, resume=resume, checkpoint_every=args.checkpoint_every, config=config,
                          beta=schedule,
                          force_resume=args.force_resume)
