@@ -13,7 +13,8 @@ arguments, their non-array leaves (hashable, as `filter_jit` requires) and the s
 their array leaves.
 
 The program is compiled with the package's XLA options (`_dynamics/_xla_flags.py`, `program_options`:
-on CPU the concurrency-optimised scheduler and the new fusion emitters off), chosen at the first call, when JAX's backend is known.
+on CPU the concurrency-optimised scheduler and the new fusion emitters off), chosen at the first call, when
+JAX's backend is known.
 Called with traced arguments (inside a user's `jax.jit` or `jax.vmap`) it is traced into the caller's
 program instead, without options of its own (JAX refuses compiler options on a nested jit).
 """
