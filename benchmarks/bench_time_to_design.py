@@ -40,6 +40,12 @@ SECTION = "The reference rod crisp on a fine mesh, and the refinement check (iss
 
 
 def main():
+    # As the ffr-jax command does, before JAX starts its backend: XLA's concurrency-optimised CPU scheduler off. A run
+    # of bench_time_to_design_links.py without it hung once for 5 minutes at 0 % CPU in the Lanczos modal analysis's
+    # host callback while building a case (benchmarks/RESULTS.md, "The two links", trap); with it, the same command ran.
+    from ffr_jax._dynamics._xla_flags import avoid_batched_lapack_deadlock
+
+    avoid_batched_lapack_deadlock()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--nx", type=int, default=50)
     parser.add_argument("--ny", type=int, default=6)

@@ -177,6 +177,12 @@ def robust_check(case, filt, projection, x, beta, areas, atol) -> dict:
 
 
 def main():
+    # As the ffr-jax command does, before JAX starts its backend: XLA's concurrency-optimised CPU scheduler off. A run
+    # of bench_time_to_design_links.py without it hung once for 5 minutes at 0 % CPU in the Lanczos modal analysis's
+    # host callback while building a case (benchmarks/RESULTS.md, "The two links", trap); with it, the same command ran.
+    from ffr_jax._dynamics._xla_flags import avoid_batched_lapack_deadlock
+
+    avoid_batched_lapack_deadlock()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("example", choices=["link", "two-links"])
     parser.add_argument("--mesh-size", type=float, default=0.004, help="link: gmsh target element size [m]")
