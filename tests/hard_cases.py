@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
-from helpers import FD_ATOL, FD_RTOL, adjoint_value_and_grad, central_difference, tight_objective  # noqa: F401
+from helpers import ATOL, FD_ATOL, FD_RTOL, RTOL, adjoint_value_and_grad, central_difference, tight_objective  # noqa: F401
 
 import ffr_jax
 
@@ -138,7 +138,7 @@ def one_sided_difference(f, h: float):
 
 
 def gradient_checks(case, x, grad, *, n_directions: int = 1, n_entries: int = 1, step: float = 1e-4,
-                    seed: int = 0, one_sided_step: float = 1e-4):
+                    seed: int = 0, one_sided_step: float = 1e-4, batched: bool = False):
     """Finite-difference counterparts of `grad`: directional derivatives and single entries.
 
     Directions are random unit vectors over the entries that lie at least `2 step` inside
@@ -153,6 +153,11 @@ def gradient_checks(case, x, grad, *, n_directions: int = 1, n_entries: int = 1,
     of 1e-6, -2.8e-7 with 1e-7, and -6.56e-8 and -6.84e-8 in two runs with 1e-5 (2.3e-9 off: 1.5e-6 of
     max |grad|, over the agreement bound): noise, shrinking 10x at 1e-4.
 
+    `batched=True` evaluates every `psi` the differences need as one `jax.vmap` of the tight objective
+    ([`tight_objectives`][]): the same solves, each with its own adaptive steps at rtol 1e-12, so the same
+    values up to round-off and the same bounds; one compiled program and one pass through the time steps
+    instead of one run per evaluation (the long horizon's eight 30-s solves).
+
     **Returns:** a list of `(what, adjoint value, finite-difference value)`.
     """
     x = jnp.asarray(x)
@@ -163,24 +168,54 @@ def gradient_checks(case, x, grad, *, n_directions: int = 1, n_entries: int = 1,
     rng = np.random.default_rng(seed)
     g = np.asarray(grad)
 
-    def psi_along(v):
-        v = jnp.asarray(v)
-        return lambda s: float(tight_objective(case, x + s * v))
-
-    out = []
+    # (what, adjoint value, direction, difference formula, its step): the formulas' evaluations are collected
+    # first, so that they can run as one batch.
+    wanted = []
     for k in range(n_directions):
         v = rng.normal(size=xn.size) * interior
         v /= np.linalg.norm(v)
-        out.append((f"direction {k}", float(g @ v), central_difference(psi_along(v), step)))
+        wanted.append((f"direction {k}", float(g @ v), v, central_difference, step))
     largest = int(np.argmax(np.abs(g) * interior))
     others = rng.permutation(np.setdiff1d(np.flatnonzero(interior), [largest]))
     entries = [largest] + [int(i) for i in others[: n_entries - 1]]
     for i in entries:
-        out.append((f"entry {i}", float(g[i]), central_difference(psi_along(np.eye(xn.size)[i]), step)))
+        wanted.append((f"entry {i}", float(g[i]), np.eye(xn.size)[i], central_difference, step))
     for i in np.flatnonzero(at_min)[:1]:
-        out.append((f"entry {i} at x_min", float(g[i]),
-                    one_sided_difference(psi_along(np.eye(xn.size)[i]), one_sided_step)))
-    return out
+        wanted.append((f"entry {i} at x_min", float(g[i]), np.eye(xn.size)[i], one_sided_difference, one_sided_step))
+
+    # Each formula's arguments s, recorded by calling it once on a recorder, then evaluated at x + s v.
+    points = []
+    for _, _, v, formula, h in wanted:
+        formula(lambda s, v=v: points.append((s, v)) or 0.0, h)
+    designs = [x + s * jnp.asarray(v) for s, v in points]
+    if batched:
+        values = [float(p) for p in tight_objectives(case, jnp.stack(designs))]
+    else:
+        values = [float(tight_objective(case, y)) for y in designs]
+    values = iter(values)
+    return [(what, a, formula(lambda s: next(values), h)) for what, a, _, formula, h in wanted]
+
+
+# XLA options for programs whose run time, not their compile, is the cost (the long horizon's 30-s solves): the
+# suite compiles with LLVM at -O0 (tests/conftest.py: compiles dominate it), which ran the 30-s adjoint gradient in
+# 29.7 s and one tight 30-s solve in 8.3 s; at XLA's default level 2 they run in 15.9 s and 5.1 s for 2-3 s more
+# compile each (one core, quiet machine). Numbers differ by round-off only, which no tolerance here depends on.
+RUN_TIME_OPTIONS = {"xla_backend_optimization_level": 2, "xla_llvm_disable_expensive_passes": False}
+
+
+@eqx.filter_jit(compiler_options=RUN_TIME_OPTIONS)
+def tight_objectives(case, xs):
+    """`psi` at each row of `xs` (`(k, n_design)`) at the finite differences' tolerances (rtol 1e-12), one
+    vmapped program: each row's solve takes its own adaptive steps, as `tight_objective` alone would
+    (compiled for run time: `RUN_TIME_OPTIONS`)."""
+    return jax.vmap(lambda y: ffr_jax.objective(case, y, rtol=FD_RTOL, atol=FD_ATOL))(xs)
+
+
+@eqx.filter_jit(compiler_options=RUN_TIME_OPTIONS)
+def adjoint_value_and_grad_for_run_time(case, x):
+    """`helpers.adjoint_value_and_grad` (the same call, the same settings) compiled with `RUN_TIME_OPTIONS`: for a
+    case of its own structure whose solves, not its compile, are the cost (it shares no program with others)."""
+    return ffr_jax.value_and_grad(case, x, "adjoint", rtol=RTOL, atol=ATOL)
 
 
 def agreement(grad, checks) -> float:
