@@ -116,14 +116,22 @@ def direct_at_x(case, x, direct_scene_fn):
 
 
 @pytest.fixture(scope="module")
-def gradients(case, x, method_fns, direct_at_x, scene_pullback):
-    """`(psi, grad)` at the random design by the adjoint, autodiff, backsolve and direct methods."""
-    out = {"adjoint": jax.block_until_ready(adjoint_value_and_grad(case, x))}
-    for name, fn in method_fns.items():
-        out[name] = jax.block_until_ready(fn(x))
+def references(case, x, method_fns):
+    """`(psi, grad)` at the random design by the adjoint and by autodiff: the references of the agreement tests.
+    The slow tests of this module need only these two; through `gradients` they also compiled the backsolve and
+    direct programs, which no slow test uses (about 20 s of the slow set's worker time, one core)."""
+    out = {"adjoint": jax.block_until_ready(adjoint_value_and_grad(case, x)),
+           "autodiff": jax.block_until_ready(method_fns["autodiff"](x))}
+    return {name: (float(psi), np.asarray(g)) for name, (psi, g) in out.items()}
+
+
+@pytest.fixture(scope="module")
+def gradients(case, x, method_fns, references, direct_at_x, scene_pullback):
+    """`(psi, grad)` at the random design by the adjoint, autodiff (`references`), backsolve and direct methods."""
+    out = {"backsolve": jax.block_until_ready(method_fns["backsolve"](x))}
     psi, g_scene = direct_at_x
     out["direct"] = (psi, scene_pullback(x, g_scene))
-    return {name: (float(psi), np.asarray(g)) for name, (psi, g) in out.items()}
+    return {**references, **{name: (float(psi), np.asarray(g)) for name, (psi, g) in out.items()}}
 
 
 # --- all five methods agree ----------------------------------------------------------------------
@@ -158,16 +166,16 @@ def _slow(method):
 
 
 @pytest.mark.parametrize("method", [_slow(m) for m in GRADIENT_METHODS if m not in ("autodiff", "fd")])
-def test_every_method_agrees_with_autodiff(case, x, gradients, method):
+def test_every_method_agrees_with_autodiff(case, x, references, method, request):
     """Each method's gradient at the random design against autodiff (the reference: the exact derivative of
     the discrete forward solution), and against the adjoint, whose own larger error then bounds the
     difference. ("fd" runs through the command line at the uniform design: the next test.)"""
-    if method in gradients:
-        grad = gradients[method][1]
-    else:
+    if method == "discrete-adjoint":  # slow; not in `gradients`, which it would compile for nothing in the slow set
         grad = np.asarray(fj.value_and_grad(case, x, method, solver=fj.Rodas5P(), rtol=RTOL, atol=ATOL)[1])
-    assert_close_relative(grad, gradients["autodiff"][1], AGREEMENT[method], f"{method} vs autodiff gradient")
-    assert_close_relative(grad, gradients["adjoint"][1], ADJOINT_VS_AUTODIFF + AGREEMENT[method],
+    else:
+        grad = request.getfixturevalue("gradients")[method][1]
+    assert_close_relative(grad, references["autodiff"][1], AGREEMENT[method], f"{method} vs autodiff gradient")
+    assert_close_relative(grad, references["adjoint"][1], ADJOINT_VS_AUTODIFF + AGREEMENT[method],
                           f"{method} vs adjoint gradient")
 
 
@@ -256,10 +264,10 @@ def test_crossing_eigenvalues_give_a_finite_gradient_matching_finite_differences
 
 # --- usage: jit, vmap, no retracing; a scene parameter ------------------------------------------
 @pytest.fixture(scope="module")
-def second_design(case, gradients):
+def second_design(case, references):
     """A second random design, its per-design adjoint call (after the first call at `x`, in the
-    `gradients` fixture), and how often the shared adjoint program was traced by then."""
-    del gradients
+    `references` fixture), and how often the shared adjoint program was traced by then."""
+    del references
     traces = TRACES["adjoint"]
     x2 = random_design(case, 1)
     return x2, adjoint_value_and_grad(case, x2), traces
@@ -270,9 +278,9 @@ def test_jit_does_not_retrace_for_new_designs(second_design):
     assert TRACES["adjoint"] == traces_before, "the compiled gradient was traced again for a new design"
 
 
-def test_vmap_equals_per_design_calls(case, x, gradients, second_design):
+def test_vmap_equals_per_design_calls(case, x, references, second_design):
     x2, (psi2, grad2), _ = second_design
-    per_design = [gradients["adjoint"], (float(psi2), np.asarray(grad2))]
+    per_design = [references["adjoint"], (float(psi2), np.asarray(grad2))]
     psis, grads = jax.jit(jax.vmap(lambda x: fj.value_and_grad(case, x, "adjoint", rtol=RTOL, atol=ATOL)))(
         jnp.stack([x, x2]))
     for k, (psi, grad) in enumerate(per_design):
