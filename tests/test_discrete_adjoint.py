@@ -1,8 +1,8 @@
 """The discrete adjoint of Rodas5P (`ffr_jax.DiscreteAdjoint`, issue 15) is the derivative of the computed psi.
 
 Independent routes to the same numbers: the hand-written transpose of one Rosenbrock step against forward
-mode through that step (default suite), the whole backward recursion against `jax.grad` through diffrax
-on the forward solve's accepted steps (`diffrax.StepTo`), and an objective with a terminal term against
+mode through that step (default suite), the whole backward recursion against forward-mode differentiation
+through diffrax on the forward solve's accepted steps (`diffrax.StepTo`), and an objective with a terminal term against
 the paper's adjoint (both `-m slow`, for the suite's 8-minute budget; its agreement with the explicit
 route is `tests/test_stiff_route.py[discrete-adjoint]`, slow too). One small slider-crank (10 x 2 mesh,
 3 modes, t1 = 0.2 s, the drivers' ramp ending at t = 0.05 s inside the motion).
@@ -78,20 +78,24 @@ def test_step_transpose_is_the_transpose_of_the_step(problem):
     assert abs(lhs - rhs) <= 1e-10 * scale, (lhs, rhs, scale)
 
 
-# About 65 s (the reverse pass through diffrax compiles slowly): kept out of the default suite, whose
+# About 50 s (three programs: the discrete adjoint, the forward solve, forward mode through it): kept out of the default suite, whose
 # budget is 8 minutes on 2 cores (at 8:01 with the discrete adjoint's end-to-end tests in it); the
 # default suite checks the discrete adjoint step by step (above).
 @pytest.mark.slow
 def test_discrete_adjoint_is_the_derivative_of_psi_on_the_forward_steps(problem):
-    # `jax.grad` through diffrax stepping exactly the forward solve's accepted steps (`StepTo`),
-    # against the discrete adjoint. The adaptive solve ends the step before the ramp's end at
-    # prevbefore(0.05) and starts the next at nextafter(0.05); `StepTo` gets both times (its extra
-    # step of two ulps adds ~1e-17 of psi). Both differentiate the same discrete psi; rounding
-    # accumulates over the ~900 steps' transposes, measured 6e-15 (scene) and 4e-13 (initial state)
-    # of the largest entry. 1e-10 keeps three orders of margin against rounding, and a wrong term in the
-    # recursion is O(1) (tests above). The switch-time handling (the step before the ramp's end recomputed
-    # up to prevbefore(0.05)) is exercised, but the ramp law is C^3 at its end, so taking that step's
-    # last stages just after the switch would change the gradient by far less than the tolerance.
+    # Forward-mode differentiation (`jax.jacfwd`, diffrax's `ForwardMode`) through diffrax stepping exactly the
+    # forward solve's accepted steps (`StepTo`), against the discrete adjoint. The adaptive solve ends the step
+    # before the ramp's end at prevbefore(0.05) and starts the next at nextafter(0.05); `StepTo` gets both times
+    # (its extra step of two ulps adds ~1e-17 of psi). Both differentiate the same discrete psi, the discrete
+    # adjoint in reverse (the transposed steps), the reference in forward mode (tangents carried through the
+    # steps): an independent route. Rounding accumulates over the ~900 steps, measured 1.2e-14 (scene) and
+    # 5.7e-13 (initial state) of the largest entry (reverse mode through diffrax, the reference until 26 Nov:
+    # 6e-15 and 4e-13). 1e-10 keeps three orders of margin against rounding, and a wrong term in the recursion
+    # is O(1) (tests above). The switch-time handling (the step before the ramp's end recomputed up to
+    # prevbefore(0.05)) is exercised, but the ramp law is C^3 at its end, so taking that step's last stages just
+    # after the switch would change the gradient by far less than the tolerance.
+    # Forward mode over the 82 float parameters and initial values compiles and runs in 18 s where reverse mode
+    # through diffrax's checkpointed loop took 37 s to trace and compile (one core, quiet machine).
     kw = dict(rtol=RTOL, atol=ATOL, solver=fj.Rodas5P(), max_steps=4096)
     psi, grad = eqx.filter_jit(lambda pr: fj.DiscreteAdjoint().value_and_grad_problem(pr, **kw))(problem)
 
@@ -105,19 +109,19 @@ def test_discrete_adjoint_is_the_derivative_of_psi_on_the_forward_steps(problem)
     ts = np.sort(np.append(ts, np.nextafter(0.05, 0.0)))
     field = _vector_field(problem)
     dynamic, static = eqx.partition((problem.scene, problem.objective), eqx.is_inexact_array)
+    flat, unravel = jax.flatten_util.ravel_pytree((dynamic, problem.y0, problem.z0))
 
-    @jax.jit
-    def on_steps(dynamic, y0, z0):
-        def psi(dynamic, y0, z0):
-            params = eqx.combine(dynamic, static)
-            solution = diffrax.diffeqsolve(
-                diffrax.ODETerm(lambda t, s, args: field(t, s, params)), fj.Rodas5P(), problem.t0, problem.t1, None,
-                (y0, z0, jnp.zeros(())), stepsize_controller=diffrax.StepTo(jnp.asarray(ts)), max_steps=len(ts))
-            return solution.ys[2][-1]
+    def psi_on_steps(p):
+        dynamic, y0, z0 = unravel(p)
+        params = eqx.combine(dynamic, static)
+        solution = diffrax.diffeqsolve(
+            diffrax.ODETerm(lambda t, s, args: field(t, s, params)), fj.Rodas5P(), problem.t0, problem.t1, None,
+            (y0, z0, jnp.zeros(())), stepsize_controller=diffrax.StepTo(jnp.asarray(ts)), max_steps=len(ts),
+            adjoint=diffrax.ForwardMode())
+        return solution.ys[2][-1], solution.ys[2][-1]
 
-        return jax.value_and_grad(psi, argnums=(0, 1, 2))(dynamic, y0, z0)
-
-    psi_steps, (g_dynamic, g_y0, g_z0) = on_steps(dynamic, problem.y0, problem.z0)
+    g_flat, psi_steps = jax.jit(jax.jacfwd(psi_on_steps, has_aux=True))(flat)
+    g_dynamic, g_y0, g_z0 = unravel(g_flat)
     np.testing.assert_allclose(float(psi), float(psi_steps), rtol=1e-13)
     assert_close_relative(jax.flatten_util.ravel_pytree(eqx.filter(grad.scene, eqx.is_inexact_array))[0],
                           jax.flatten_util.ravel_pytree(g_dynamic[0])[0], 1e-10, "scene gradient")
