@@ -323,9 +323,10 @@ def value_and_grad(target, x: DesignsInput | None = None, method: str | Abstract
       dict `{body name: (n_design_b,) densities}` in `[x_min, 1]`, or a flat `(n_design,)` array
       when the case designs one body; or a [`Problem`][] (no `x`).
     - `method`: `None` (default): the route [`choose_route`][] picks from the retained frequencies and
-      the time span — the discrete adjoint of Rodas5P at rtol 1e-7 where an explicit solver would sit
-      at its stability limit (the reference case: 2.3 s on a 2-core machine, 2.5e-8 of the largest entry
-      from a tight reference), else the paper's adjoint with Dopri8 at rtol 1e-10; the route is named in
+      the time span — the discrete adjoint of Rodas5P at rtol 1e-6 / atol 2e-9 (documented accuracy 1e-6
+      of the largest entry) where an explicit solver would sit at its stability limit (the reference
+      case: 1.2 s on one core, 7.6e-8 of the largest entry from a tight reference), else the paper's
+      adjoint with Dopri8 at rtol 1e-10; the route is named in
       the first call's compile message on the `"ffr_jax"` logger (INFO). Or `"adjoint"` (the paper's adjoint variable method), `"autodiff"`
       (`jax.grad` through diffrax), `"backsolve"` (diffrax `BacksolveAdjoint`), `"direct"`
       (forward sensitivities), `"fd"` (central differences, designs only), `"discrete-adjoint"`

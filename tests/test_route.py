@@ -64,7 +64,7 @@ def test_given_options_override_the_route():
     case = fj.cases.slider_crank(4, 2, 2, 3.0)  # a stiff member: 316 Hz over 3 s, ~1,600 steps
     method, solver, rtol, atol, _ = _route(case, None, None, None, None)
     assert isinstance(method, fj.DiscreteAdjoint) and isinstance(solver, fj.Rodas5P)
-    assert (rtol, atol) == (1e-7, 1e-9)
+    assert (rtol, atol) == (route_module.STIFF_RTOL, route_module.STIFF_ATOL)
     # rtol alone: the route's method and solver, atol two decades below rtol (as both routes' defaults).
     assert _route(case, None, None, 1e-9, None)[2:4] == (1e-9, 1e-9 / 100)
     # A method given: that method at the paper's tolerances, whatever the route.
