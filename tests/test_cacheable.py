@@ -17,6 +17,7 @@ from helpers import ATOL, RTOL, adjoint_value_and_grad, random_design, small_cas
 
 import ffr_jax as fj
 from ffr_jax._dynamics._xla_flags import SCHEDULER_OPTION
+from ffr_jax._sensitivity import _cached as cached
 from ffr_jax._sensitivity._cached import _program_key, compile_value_and_grad
 
 
@@ -111,6 +112,30 @@ def test_a_program_is_keyed_by_the_platform_it_runs_on(monkeypatch):
     here = _program_key((_named,), treedef, leaves, {})
     monkeypatch.setattr(jax, "default_backend", lambda: "cuda" if jax.devices()[0].platform == "cpu" else "cpu")
     assert _program_key((_named,), treedef, leaves, {}) != here
+
+
+def _host_sum(v):
+    """A program with a host callback (like the FE stage with SciPy's Lanczos solver): it cannot be exported."""
+    return jax.pure_callback(lambda a: np.asarray(np.sum(a), a.dtype), jax.ShapeDtypeStruct((), v.dtype), v) + v
+
+
+def test_a_program_that_cannot_be_exported_is_not_tried_again(tmp_path, monkeypatch):
+    # The first call finds the program not exportable (a host callback) and leaves a note with the reason; a later
+    # process (here: the in-process programs forgotten) compiles it directly, without tracing it for export again.
+    # The note would be ignored if the key differed, so the check also shows that the key is stable.
+    v = jnp.arange(3.0)
+    first = cached.kept_call(_host_sum, (v,), tmp_path, "a host sum")
+    notes = list((tmp_path / "programs").glob("*.unexportable"))
+    assert len(notes) == 1 and "callback" in notes[0].read_text(), notes
+    assert not list((tmp_path / "programs").glob("*.jaxexport")), "nothing exported"
+    monkeypatch.setattr(cached, "_KEPT", {})
+
+    tried = []
+    monkeypatch.setattr(cached, "_export", lambda *args: tried.append(args) or None)
+    again = cached.kept_call(_host_sum, (v,), tmp_path, "a host sum")
+    assert not tried, "the export was tried again"
+    np.testing.assert_array_equal(np.asarray(first), np.asarray(again))
+    np.testing.assert_array_equal(np.asarray(again), np.asarray(v) + 3.0)
 
 
 # --- from Python: a second process loads the compiled gradient (issue 28) -------------------------

@@ -268,7 +268,7 @@ class MinimalModel(eqx.Module):
         `R(t, y_r, z_r, zdot, p)` the [`residual`][], `dzdot = -Mbar^-1 dR` at fixed `zdot`. On the
         reference case at 30 modes this halves the cost of a Jacobian by `jax.jacfwd`.
         """
-        return _state_and_accelerations(self, jnp.asarray(t, dtype=jnp.result_type(y, float)), y, z, scene)
+        return _state_and_accelerations_once(self, jnp.asarray(t, dtype=jnp.result_type(y, float)), y, z, scene)
 
     def _state_and_accelerations(self, t, y, z, scene: Scene):
         y_r = self.positions(t, y, scene)
@@ -464,6 +464,14 @@ def _state_and_accelerations_jvp(primals, tangents):
         return _state_and_accelerations_tangents(model, t, y, z, scene, dt, dy, dz, None)
     _, dt, dy, dz, dscene = _zeros_for_none(primals, tangents)
     return _state_and_accelerations_tangents(model, t, y, z, scene, dt, dy, dz, dscene)
+
+
+# Traced once per structure and shapes, then reused: a Rosenbrock step and its transposition, the adjoint's
+# products and diffrax's own evaluations call the equations of motion many times under several transformations,
+# and inside a jit boundary JAX keeps one trace and one JVP, linearisation or batch of it per use. XLA inlines
+# the calls again, so the compiled program, and its numbers, are those without it (the README mechanism's
+# first gradient: 21.6 -> 18.9 s, one core; benchmarks/RESULTS.md, "Compile time").
+_state_and_accelerations_once = eqx.filter_jit(_state_and_accelerations)
 
 
 def _state_and_accelerations_tangents(model, t, y, z, scene, dt, dy, dz, dscene):

@@ -31,7 +31,8 @@ checks in `nan` mode (no callbacks: the persistent cache keeps them) and exporte
 
 A check that fails makes a result NaN; that step then runs again with the checks raising, so the user
 sees the package's own message, never a NaN. A program that cannot be exported (e.g. an FE stage that
-calls SciPy's sparse eigensolver through a callback) is compiled in every process as before. Tracing in
+calls SciPy's sparse eigensolver through a callback) is compiled in every process as before (a note
+`<key>.unexportable` next to the programs spares later processes the attempt to export it). Tracing in
 `nan` mode clears JAX's in-memory caches before and after (`_checks_as_nan`): once per machine, shapes
 and settings, other compiled functions of the process compile again on their next call.
 
@@ -352,30 +353,34 @@ def _gradient_programs(case, x, method, options, export_dir, need_key: bool = Fa
     if memo and None not in keys and keys in _COMPILED:
         return _COMPILED[keys], False
     paths = {name: _load_path(key, export_dir) for name, (_, _, key) in parts.items()}
-    cached = all(path is not None and path.is_file() for path in paths.values())
+    exported = {name: _load(paths[name]) for name in parts}
+    # A program an earlier process could not export (e.g. the FE stage with SciPy's Lanczos solver, a host
+    # callback) is compiled directly: its export is not tried again, one trace less in every later process.
+    unexportable = {name for name in parts if _unexportable(paths[name])}
+    logger = logging.getLogger("ffr_jax")
     where = None if paths["gradient"] is None else paths["gradient"].parent
-    logging.getLogger("ffr_jax").info(
+    logger.info(
         "getting the design gradient (first call in this process for these shapes and settings): %s...",
-        f"loading it from the cache ({where})" if cached else
+        f"loading it from the cache ({where})" if exported["gradient"] is not None else
         "compiling it" + ("" if where is None else f" (kept in {where} for later processes)"))
     start = time.perf_counter()
-    exported = {name: _load(paths[name]) for name in parts}
-    if any(e is None for e in exported.values()):
+    if any(exported[name] is None and name not in unexportable for name in parts):
         with _checks_as_nan():  # traced without host callbacks, so that XLA's persistent cache keeps them
             for name, (flat, leaves, _) in parts.items():
-                if exported[name] is None:
+                if exported[name] is None and name not in unexportable:
                     try:
                         exported[name] = _export(paths[name], flat, leaves)
                     except Exception as err:  # e.g. SciPy in the FE stage: compiled below with the checks raising
-                        logging.getLogger("ffr_jax").info("the %s program cannot be exported (%s: %s); it is "
-                                                          "compiled in every process", name, type(err).__name__, err)
+                        logger.info("the %s program cannot be exported (%s: %s); it is compiled in every process",
+                                    name, type(err).__name__, err)
+                        _mark_unexportable(paths[name], err)
     programs = {}
     for name, (flat, leaves, _) in parts.items():
         if exported[name] is None:
             programs[name] = _Program(jax.jit(flat).lower(*leaves).compile(_options()), False)
         else:  # XLA: from the persistent cache when it has the program
-            programs[name] = _Program(jax.jit(exported[name].call).lower(*leaves).compile(_options()),
-                                      paths[name] is not None and exported[name] is not None and cached)
+            loaded = paths[name] is not None and paths[name].is_file() and exported[name] is not None
+            programs[name] = _Program(jax.jit(exported[name].call).lower(*leaves).compile(_options()), loaded)
     gradient = _Gradient(programs["scene"], programs["gradient"], programs["pullback"], scene_static,
                          jax.tree_util.tree_structure(scene_dynamic), jax.tree_util.tree_structure(g_shapes),
                          jax.tree_util.tree_structure(x_shapes), time.perf_counter() - start)
@@ -387,6 +392,29 @@ def _gradient_programs(case, x, method, options, export_dir, need_key: bool = Fa
 def _load_path(key, export_dir):
     """Where the exported program of `key` is kept, or `None`."""
     return None if key is None or export_dir is None else pathlib.Path(export_dir) / f"{key}.jaxexport"
+
+
+def _unexportable_path(path):
+    return None if path is None else path.with_suffix(".unexportable")
+
+
+def _unexportable(path) -> bool:
+    """Whether an earlier process found the program of `path` not exportable (see `_mark_unexportable`)."""
+    marker = _unexportable_path(path)
+    return marker is not None and marker.is_file()
+
+
+def _mark_unexportable(path, err: Exception) -> None:
+    """Note next to `path` that its program cannot be exported (the reason inside), so that later processes
+    compile it directly; the note carries the program's key, so a changed package or setting tries again."""
+    marker = _unexportable_path(path)
+    if marker is None:
+        return
+    try:
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.write_text(f"{type(err).__name__}: {err}\n")
+    except OSError:  # a read-only cache: tried again next time
+        pass
 
 
 def _load(path):
@@ -458,8 +486,8 @@ def kept_call(function, args: tuple, directory: pathlib.Path, what: str, out_lik
     Says on the package's logger, once per process and program, whether it compiles or loads.
 
     `out_like`: the output's structure with the shapes of its arrays, where the caller knows it without
-    tracing (checked against the loaded program's outputs); else it is found by tracing `function`
-    abstractly, which a loaded program would otherwise be spared."""
+    tracing (checked against the exported or loaded program's outputs); else it is found by tracing
+    `function` abstractly once more (also where the program cannot be exported)."""
     dynamic, static = eqx.partition(args, _is_array)
     leaves, treedef = jax.tree_util.tree_flatten(dynamic)
     shapes = [jax.ShapeDtypeStruct(leaf.shape, leaf.dtype) for leaf in leaves]
@@ -475,6 +503,16 @@ def kept_call(function, args: tuple, directory: pathlib.Path, what: str, out_lik
         start = time.perf_counter()
         flat = _flat(function, static, treedef)
         exported = _load(path)
+        if exported is None and not _unexportable(path):
+            with _checks_as_nan():
+                try:
+                    exported = _export(path, flat, shapes)
+                except Exception as err:  # not exportable: compiled below with the checks raising
+                    logger.info("%s cannot be exported (%s: %s); it is compiled in every process", what,
+                                type(err).__name__, err)
+                    _mark_unexportable(path, err)
+        # The output's structure from the caller, checked against the exported program's outputs: the export is
+        # then the only trace (before, a first process traced the function abstractly once more for it).
         structure = _structure(out_like, exported)
         if structure is None:
             structure = eqx.partition(eqx.filter_eval_shape(function, *args), _is_array)
@@ -485,13 +523,6 @@ def kept_call(function, args: tuple, directory: pathlib.Path, what: str, out_lik
                 logger.info("%s: the expected output structure differs from the traced one; not kept", what)
                 return None
         out_dynamic, out_static = structure
-        if exported is None:
-            with _checks_as_nan():
-                try:
-                    exported = _export(path, flat, shapes)
-                except Exception as err:  # not exportable: compiled below with the checks raising
-                    logger.info("%s cannot be exported (%s: %s); it is compiled in every process", what,
-                                type(err).__name__, err)
         if exported is None:
             compiled = jax.jit(flat).lower(*shapes).compile(_options())
         else:  # XLA: from the persistent cache when it has the program
