@@ -30,8 +30,10 @@ def test_custom_derivative_of_accelerations_equals_the_direct_one(n_modes):
         scale = float(jnp.max(jnp.abs(b)))
         assert float(jnp.max(jnp.abs(a - b))) <= 1e-11 * scale, what
 
-    for a, b in zip(custom(t, y, z, scene), direct(t, y, z, scene)):
-        np.testing.assert_array_equal(a, b)
+    # The values: `custom` runs compiled (the equations of motion sit behind a jit boundary), `direct` op by op, so
+    # XLA may round differently (measured 1.8e-16 relative); the same bound as the derivatives.
+    for k, (a, b) in enumerate(zip(custom(t, y, z, scene), direct(t, y, z, scene))):
+        close(a, b, f"output {k}")
     # Compiled, not run op by op: eager dispatch of the Jacobians' thousands of small operations cost
     # about a minute per parametrisation on two cores; one compiled program each takes seconds.
     jac_custom = eqx.filter_jit(jax.jacfwd(custom, argnums=(0, 1, 2)))(t, y, z, scene)

@@ -354,6 +354,7 @@ def _gradient_programs(case, x, method, options, export_dir, need_key: bool = Fa
         return _COMPILED[keys], False
     paths = {name: _load_path(key, export_dir) for name, (_, _, key) in parts.items()}
     exported = {name: _load(paths[name]) for name in parts}
+    loaded = {name: exported[name] is not None for name in parts}  # kept by an earlier process, not traced here
     # A program an earlier process could not export (e.g. the FE stage with SciPy's Lanczos solver, a host
     # callback) is compiled directly: its export is not tried again, one trace less in every later process.
     unexportable = {name for name in parts if _unexportable(paths[name])}
@@ -379,8 +380,7 @@ def _gradient_programs(case, x, method, options, export_dir, need_key: bool = Fa
         if exported[name] is None:
             programs[name] = _Program(jax.jit(flat).lower(*leaves).compile(_options()), False)
         else:  # XLA: from the persistent cache when it has the program
-            loaded = paths[name] is not None and paths[name].is_file() and exported[name] is not None
-            programs[name] = _Program(jax.jit(exported[name].call).lower(*leaves).compile(_options()), loaded)
+            programs[name] = _Program(jax.jit(exported[name].call).lower(*leaves).compile(_options()), loaded[name])
     gradient = _Gradient(programs["scene"], programs["gradient"], programs["pullback"], scene_static,
                          jax.tree_util.tree_structure(scene_dynamic), jax.tree_util.tree_structure(g_shapes),
                          jax.tree_util.tree_structure(x_shapes), time.perf_counter() - start)
