@@ -470,7 +470,7 @@ def _state_and_accelerations_jvp(primals, tangents):
 # products and diffrax's own evaluations call the equations of motion many times under several transformations,
 # and inside a jit boundary JAX keeps one trace and one JVP, linearisation or batch of it per use. XLA inlines
 # the calls again, so the compiled program, and its numbers, are those without it (the README mechanism's
-# first gradient: 21.6 -> 18.9 s, one core; benchmarks/RESULTS.md, "Compile time").
+# first gradient, tracing 24-30 -> 10 s on one core; benchmarks/RESULTS.md, "Where a first call's time goes").
 _state_and_accelerations_once = eqx.filter_jit(_state_and_accelerations)
 
 

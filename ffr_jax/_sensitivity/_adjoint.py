@@ -194,7 +194,8 @@ def adjoint_products(problem: Problem, t, y, z, params, mu, w, *, design: bool =
 
 # The backward solve evaluates the products at several places (diffrax's first step size, the stages, the FSAL
 # evaluation): behind a jit boundary they are traced once per structure and shapes, not at each (XLA inlines the
-# calls again: the same program). The README mechanism's first gradient: tracing 10.1 -> 6.2 s (RESULTS, "Compile time").
+# calls again: the same program). The README mechanism's first gradient: tracing 10.1 -> 6.2 s (benchmarks/RESULTS.md,
+# "Where a first call's time goes").
 _adjoint_products_once = eqx.filter_jit(adjoint_products)
 
 
