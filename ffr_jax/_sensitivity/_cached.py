@@ -369,12 +369,7 @@ def _gradient_programs(case, x, method, options, export_dir, need_key: bool = Fa
         with _checks_as_nan():  # traced without host callbacks, so that XLA's persistent cache keeps them
             for name, (flat, leaves, _) in parts.items():
                 if exported[name] is None and name not in unexportable:
-                    try:
-                        exported[name] = _export(paths[name], flat, leaves)
-                    except Exception as err:  # e.g. SciPy in the FE stage: compiled below with the checks raising
-                        logger.info("the %s program cannot be exported (%s: %s); it is compiled in every process",
-                                    name, type(err).__name__, err)
-                        _mark_unexportable(paths[name], err)
+                    exported[name] = _try_export(paths[name], flat, leaves, f"the {name} program")
     programs = {}
     for name, (flat, leaves, _) in parts.items():
         if exported[name] is None:
@@ -415,6 +410,19 @@ def _mark_unexportable(path, err: Exception) -> None:
         marker.write_text(f"{type(err).__name__}: {err}\n")
     except OSError:  # a read-only cache: tried again next time
         pass
+
+
+def _try_export(path, function, leaves, what: str):
+    """The program exported (and kept at `path`), or `None` where it cannot be (e.g. a host callback such as SciPy
+    in the FE stage): then noted for later processes (`_mark_unexportable`), and the caller compiles it with the
+    checks raising."""
+    try:
+        return _export(path, function, leaves)
+    except Exception as err:  # noqa: BLE001 - any refusal of jax.export: the program still runs, compiled here
+        logging.getLogger("ffr_jax").info("%s cannot be exported (%s: %s); it is compiled in every process", what,
+                                          type(err).__name__, err)
+        _mark_unexportable(path, err)
+        return None
 
 
 def _load(path):
@@ -505,12 +513,7 @@ def kept_call(function, args: tuple, directory: pathlib.Path, what: str, out_lik
         exported = _load(path)
         if exported is None and not _unexportable(path):
             with _checks_as_nan():
-                try:
-                    exported = _export(path, flat, shapes)
-                except Exception as err:  # not exportable: compiled below with the checks raising
-                    logger.info("%s cannot be exported (%s: %s); it is compiled in every process", what,
-                                type(err).__name__, err)
-                    _mark_unexportable(path, err)
+                exported = _try_export(path, flat, shapes, what)
         # The output's structure from the caller, checked against the exported program's outputs: the export is
         # then the only trace (before, a first process traced the function abstractly once more for it).
         structure = _structure(out_like, exported)
