@@ -60,7 +60,8 @@ def _calls(target: str):
     case = cases[case_name]()
     calls = {"gradient": lambda c, x: fj.value_and_grad(c, x),
              "adjoint": lambda c, x: fj.value_and_grad(c, x, "adjoint"),
-             "objective": lambda c, x: fj.objective(c, x)}
+             "objective": lambda c, x: fj.objective(c, x),
+             "simulate": lambda c, x: fj.simulate(c, x)}
     return design_pair(case, calls[entry])
 
 
@@ -94,7 +95,8 @@ def measure(target: str) -> dict:
                 misses=counts.get("/jax/compilation_cache/cache_misses", 0), load=os.getloadavg()[0])
 
 
-TARGETS = ("reference-gradient", "reference-adjoint", "reference-objective", "readme-gradient", "four-bar-gradient",
+TARGETS = ("reference-gradient", "reference-adjoint", "reference-objective", "reference-simulate", "readme-gradient",
+           "four-bar-gradient",
            "link-four-bar-gradient", "two-links-gradient", "pendulum-gradient", "spinning-beam-gradient")
 
 
@@ -135,7 +137,8 @@ def main():
         "",
         "Targets: `reference-gradient` `fj.value_and_grad(fj.cases.slider_crank(), x)` with no options (the default",
         "route: the discrete adjoint of Rodas5P), `reference-adjoint` the same with `method=\"adjoint\"` (the default",
-        "before issue 28: Dopri8, rtol 1e-10), `reference-objective` `fj.objective(case, x)`, `readme-gradient`",
+        "before issue 28: Dopri8, rtol 1e-10), `reference-objective` `fj.objective(case, x)`, `reference-simulate`",
+        "`fj.simulate(case, x)` (the whole trajectory at the solver's steps), `readme-gradient`",
         "`fj.value_and_grad(problem)` of the README's own mechanism, `<case>-gradient` `fj.value_and_grad(case, x)` of",
         "the other shipped cases with their default arguments. Later call: another design (or spring constant).",
         "",
