@@ -138,7 +138,7 @@ def main():
         "Targets: `reference-gradient` `fj.value_and_grad(fj.cases.slider_crank(), x)` with no options (the default",
         "route: the discrete adjoint of Rodas5P), `reference-adjoint` the same with `method=\"adjoint\"` (the default",
         "before issue 28: Dopri8, rtol 1e-10), `reference-objective` `fj.objective(case, x)`, `reference-simulate`",
-        "`fj.simulate(case, x)` (the whole trajectory at the solver's steps), `readme-gradient`",
+        "`fj.simulate(case, x)` (its default output: the state at t1), `readme-gradient`",
         "`fj.value_and_grad(problem)` of the README's own mechanism, `<case>-gradient` `fj.value_and_grad(case, x)` of",
         "the other shipped cases with their default arguments. Later call: another design (or spring constant).",
         "",
