@@ -135,8 +135,9 @@ def _objective_problem_fn(problem, solver, rtol, atol, max_steps):
     return _simulate_problem_fn(problem, solver, rtol, atol, None, False, max_steps, None, None).psi
 
 
-def _objective_case_fn(case, x, solver, rtol, atol, max_steps):
-    return _simulate_case_fn(case, x, solver, rtol, atol, None, False, max_steps, None).psi
+def _case_scene_fn(case, x):
+    """The FE stage of a case: its scene at design `x` (FE model, modal reduction, body data)."""
+    return case.scene(case.check(x))
 
 
 def _shape_of(leaf):
@@ -307,9 +308,21 @@ def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, ato
                      lambda: _simulate_problem(target, solver, rtol, atol, None, False, max_steps, None, None).psi,
                      out_like=_scalar_like(target))
     x = _design(target, x, "objective")
-    return _kept(_objective_case_fn, (target, x, solver, rtol, atol, max_steps), "the objective of a case",
-                 lambda: _simulate_case(target, x, solver, rtol, atol, None, False, max_steps, None).psi,
-                 out_like=_scalar_like(target.problem))
+
+    def plain():  # one program, the FE stage and the solve (the in-process path)
+        return _simulate_case(target, x, solver, rtol, atol, None, False, max_steps, None).psi
+
+    # Kept between processes as two programs split at the scene, as the design gradient is: the FE stage (loaded
+    # where it can be exported; with SciPy's Lanczos modes, a host callback, compiled in every process) and the solve
+    # (always exportable: loaded). One program with the FE stage inside was compiled whole in every process wherever
+    # the FE stage has callbacks: the reference case's second process 4.4 s -> 1.5 s, its first 6.7 s -> 4.9 s (two
+    # cores; benchmarks/RESULTS.md, "Compile time per public entry point"). The same psi, all digits printed.
+    scene = _kept(_case_scene_fn, (target, x), "the FE stage of a case", lambda: None)
+    if scene is None:  # the cache is off, or the case has no key (e.g. a lambda in it)
+        return plain()
+    problem = target.problem.with_scene(scene)
+    return _kept(_objective_problem_fn, (problem, solver, rtol, atol, max_steps), "the objective of a case (its solve)",
+                 plain, out_like=_scalar_like(problem))
 
 
 @clean_errors
