@@ -314,9 +314,9 @@ def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, ato
 
     # Kept between processes as two programs split at the scene, as the design gradient is: the FE stage (loaded
     # where it can be exported; with SciPy's Lanczos modes, a host callback, compiled in every process) and the solve
-    # (always exportable: loaded). One program with the FE stage inside was compiled whole in every process wherever
-    # the FE stage has callbacks: the reference case's second process 4.4 s -> 1.5 s, its first 6.7 s -> 4.9 s (two
-    # cores; benchmarks/RESULTS.md, "Compile time per public entry point"). The same psi, all digits printed.
+    # (exported, then loaded). One program with the FE stage inside was compiled whole in every process wherever the
+    # FE stage has callbacks: the reference case's second process 6.8 -> 2.1 s, its first call 8.9 -> 6.9 s (one core;
+    # benchmarks/RESULTS.md, "Compile time per public entry point"). The same psi, all digits printed.
     scene = _kept(_case_scene_fn, (target, x), "the FE stage of a case", lambda: None)
     if scene is None:  # the cache is off, or the case has no key (e.g. a lambda in it)
         return plain()
