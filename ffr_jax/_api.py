@@ -34,8 +34,8 @@ from ._sensitivity._base import AbstractSensitivity
 from ._sensitivity._direct import Direct
 from ._sensitivity._discrete_adjoint import DiscreteAdjoint
 from ._sensitivity._finite_differences import FiniteDifferences
-from ._sensitivity._cached import (Uncacheable, cache_directory, cacheable, cached_value_and_grad, kept_call,
-                                  use_persistent_cache)
+from ._sensitivity._cached import (Uncacheable, _scene_of, cache_directory, cacheable, cached_value_and_grad,
+                                  kept_call, use_persistent_cache)
 from ._sensitivity._check import GradientCheck, compare_with_differences
 from ._sensitivity._route import choose_route
 from ._dynamics._simulate import Trajectory, simulate as simulate_redundant, solve_minimal
@@ -133,11 +133,6 @@ def _simulate_case_fn(case, x, solver, rtol, atol, ts, dense, max_steps, adjoint
 
 def _objective_problem_fn(problem, solver, rtol, atol, max_steps):
     return _simulate_problem_fn(problem, solver, rtol, atol, None, False, max_steps, None, None).psi
-
-
-def _case_scene_fn(case, x):
-    """The FE stage of a case: its scene at design `x` (FE model, modal reduction, body data)."""
-    return case.scene(case.check(x))
 
 
 def _shape_of(leaf):
@@ -317,7 +312,8 @@ def objective(target, x: DesignsInput | None = None, *, rtol: float = 1e-10, ato
     # (exported, then loaded). One program with the FE stage inside was compiled whole in every process wherever the
     # FE stage has callbacks: the reference case's second process 6.8 -> 2.1 s, its first call 8.9 -> 6.9 s (one core;
     # benchmarks/RESULTS.md, "Compile time per public entry point"). The same psi, all digits printed.
-    scene = _kept(_case_scene_fn, (target, x), "the FE stage of a case", lambda: None)
+    # The FE stage is the design gradient's own (`_scene_of`, the same key): one kept program for both.
+    scene = _kept(_scene_of, (target, x), "the FE stage of a case", lambda: None)
     if scene is None:  # the cache is off, or the case has no key (e.g. a lambda in it)
         return plain()
     problem = target.problem.with_scene(scene)
