@@ -8,6 +8,14 @@ and the adjoint, then XLA), and without a word the user cannot tell a compile fr
 (`logging.getLogger("ffr_jax")`, level INFO), and after it the time the call took. Later calls with
 the same structure and shapes log nothing.
 
+Python's cyclic garbage collector is paused during that first call (`collector_paused`; the kept programs of `_sensitivity/_cached.py` use it too). Tracing a
+solver and its adjoint allocates millions of small objects (tracers, jaxpr equations, their parameters) that all
+live until the program is lowered; the collector starts a collection every 700 net allocations and scans them
+again and again, none of them garbage. On the README mechanism's gradient it took ~8 % of the first call's
+samples (`perf`), and its tracing 5.3-6.5 s with it on against 4.5-5.3 s paused (`benchmarks/RESULTS.md`,
+"Compile time"). The process's setting is the user's and is restored after (a collector the user turned off
+stays off; a nested pause changes nothing); what became garbage meanwhile goes at the next collection.
+
 The signature that decides "first call" is the one `filter_jit` caches on: the tree structure of the
 arguments, their non-array leaves (hashable, as `filter_jit` requires) and the shapes and dtypes of
 their array leaves.
@@ -19,6 +27,8 @@ Called with traced arguments (inside a user's `jax.jit` or `jax.vmap`) it is tra
 program instead, without options of its own (JAX refuses compiler options on a nested jit).
 """
 
+import contextlib
+import gc
 import logging
 import time
 from collections.abc import Callable
@@ -29,6 +39,18 @@ import jax
 from ._dynamics._xla_flags import program_options
 
 logger = logging.getLogger("ffr_jax")
+
+
+@contextlib.contextmanager
+def collector_paused():
+    """Pause Python's cyclic garbage collector inside the `with` block; restore its state after (module docstring)."""
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
 
 
 def _signature(args) -> tuple:
@@ -74,9 +96,10 @@ class Program:
         logger.info("compiling %s (first call for these shapes and settings)...", what)
         start = time.perf_counter()
         try:
-            out = self._jitted(*args)
-            if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(out)):
-                jax.block_until_ready(out)
+            with collector_paused():  # tracing allocates millions of objects that live until lowered
+                out = self._jitted(*args)
+                if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(out)):
+                    jax.block_until_ready(out)
         finally:  # compiled, whether or not the run then raised (a failed check, a dead point)
             self._seen.add(key)
         logger.info("%s: compiled and ran in %.1f s", what, time.perf_counter() - start)
