@@ -1,6 +1,7 @@
 """The aggregated (p-norm) stress of a designed body over its elements and the motion, with its design gradient."""
 
 import equinox as eqx
+import jax.numpy as jnp
 
 from .. import _api
 from .._compiled import Program
@@ -75,5 +76,7 @@ def aggregated_stress(case, x, limit, *, power=8.0, relaxation=0.5,
                          "aggregated_stress(case, x +- h v, ...)[0] instead.")
     _api._check_options("ffr_jax.aggregated_stress", rtol, atol, max_steps)
     x = _api._design(case, x, "ffr_jax.aggregated_stress")
-    return _aggregated(case, x, limit, power, float(relaxation), method, rtol, atol, solver, max_steps)
+    # The limit as an array: an input of the compiled program, so that another limit does not compile it again.
+    return _aggregated(case, x, jnp.asarray(limit, dtype=float), power, float(relaxation), method, rtol, atol, solver,
+                       max_steps)
 

@@ -1,6 +1,7 @@
 """The p-norm integrand of the relaxed von Mises stress of a flexible body over its Gauss points."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -15,10 +16,19 @@ def von_mises_squared(sigma):
     return sxx**2 + syy**2 - sxx * syy + 3.0 * txy**2
 
 
+def _is_number(value) -> bool:
+    """A real number: a Python or NumPy scalar or a concrete 0-d array of a real, non-boolean dtype."""
+    if isinstance(value, (bool, np.bool_)) or isinstance(value, jax.core.Tracer):
+        return False
+    if isinstance(value, (int, float, np.floating, np.integer)):
+        return True
+    return (isinstance(value, (np.ndarray, jax.Array)) and np.ndim(value) == 0
+            and np.issubdtype(np.result_type(value), np.number) and not np.iscomplexobj(value))
+
+
 def check_stress_options(limit, power, relaxation=None, where: str = "StressMeasure") -> tuple[float, float]:
     """`(limit, power)` as floats, or a `ValueError` saying what is wrong (checked before anything is traced)."""
-    if isinstance(limit, bool) or not isinstance(limit, (int, float, np.floating, np.integer)) \
-            or not np.isfinite(limit) or not limit > 0:
+    if not _is_number(limit) or not np.isfinite(float(limit)) or not float(limit) > 0:
         raise ValueError(f"{where}: the stress limit must be a positive finite number (in Pa, like the material's "
                          f"Young's modulus), got {limit!r}.")
     if isinstance(power, bool) or not isinstance(power, (int, float)) or not np.isfinite(power) or not power >= 2:
@@ -56,11 +66,18 @@ class StressMeasure(AbstractIntegrand):
 
     stress_modes: Float[Array, "n_elements 4 3 n_q"]
     body: int = eqx.field(static=True)
-    limit: float = eqx.field(static=True)
+    limit: Float[Array, ""]
     power: float = eqx.field(static=True)
 
     def __init__(self, stress_modes, body: int, limit, power=8.0):
-        self.limit, self.power = check_stress_options(limit, power)
+        # The limit is an array leaf, not a static value: a compiled program takes a new limit as an input instead of
+        # compiling again. Traced (an argument of a compiled program), it was checked where it entered.
+        if isinstance(limit, jax.core.Tracer):
+            _, self.power = check_stress_options(1.0, power)
+            self.limit = limit
+        else:
+            limit, self.power = check_stress_options(limit, power)
+            self.limit = jnp.asarray(limit, dtype=float)
         if np.ndim(stress_modes) != 4 or np.shape(stress_modes)[1:3] != (4, 3):
             raise ValueError(f"StressMeasure needs stress modes of shape (n_elements, 4, 3, n_q) (see "
                              f"ffr_jax.relaxed_stress_modes), got {np.shape(stress_modes)}.")
