@@ -104,6 +104,40 @@ def test_a_function_counts_by_its_code_and_a_closure_is_never_keyed():
     assert _program_key((factory(1.0),), treedef, leaves, {}) is None
 
 
+# A function whose code holds a generator expression and a set of string constants: the generator's code object
+# shows its address in its `repr`, and the set's `repr` follows string hashing, both different in every process.
+_NESTED_SOURCE = """
+def guess(t, names):
+    parts = tuple(2.0 * t for _ in range(3))
+    return parts if names in {"crank", "coupler", "rocker"} else None
+"""
+
+
+def _nested_token():
+    namespace = {"__name__": "user_module"}
+    exec(_NESTED_SOURCE, namespace)
+    return cached._function_token(namespace["guess"])
+
+
+def test_a_function_has_the_same_key_in_another_process():
+    # The four-bar's dependent-coordinate guess holds a generator expression; until 27 Nov its key came from the
+    # `repr` of its constants, the generator's address among them, so a second process never found the programs a
+    # first had kept and traced and exported them again (the four-bar's second process 27 s, 12.6 s of it tracing).
+    import subprocess
+    import sys
+
+    from ffr_jax.cases._four_bar import _four_bar_guess
+
+    here = (cached._function_token(_four_bar_guess), _nested_token())
+    assert None not in here and not any(" at 0x" in token for token in here), here
+    script = ("import sys; sys.path.insert(0, %r); import test_cacheable as t; "
+              "from ffr_jax.cases._four_bar import _four_bar_guess; "
+              "print(t.cached._function_token(_four_bar_guess)); print(t._nested_token())") % os.path.dirname(__file__)
+    env = dict(os.environ, PYTHONHASHSEED="12345")  # another string hashing than this process's (random) one
+    other = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, check=True)
+    assert tuple(other.stdout.split("\n")[:2]) == here, (other.stdout, other.stderr[-2000:], here)
+
+
 def test_a_program_is_keyed_by_the_platform_it_runs_on(monkeypatch):
     # Found on an H100 (RESULTS "GPU"): a program exported by a GPU process was loaded by a CPU process
     # sharing the cache folder, and JAX refused it ("exported for platforms ('cuda',) but it is used on

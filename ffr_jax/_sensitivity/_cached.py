@@ -148,9 +148,30 @@ def _function_token(function) -> str | None:
         return None
     if function.__closure__ or function.__name__ == "<lambda>":
         return None
-    code = function.__code__
-    digest = hashlib.sha256(code.co_code + repr((code.co_consts, code.co_names, function.__defaults__)).encode())
+    text = _code_text(function.__code__) + repr(function.__defaults__)
+    if " at 0x" in text:  # a default shown by its address: nothing in the text fixes it across processes
+        return None
+    digest = hashlib.sha256(text.encode())
     return f"<function {function.__module__}.{function.__qualname__} {digest.hexdigest()[:16]}>"
+
+
+def _code_text(code: types.CodeType) -> str:
+    """A code object as text that is the same in every process: its bytecode, names and constants, nested code
+    objects (comprehensions, generator expressions, inner functions) by their own text, not their `repr` (which
+    shows their address: a function holding a generator expression got a new key in every process, so its
+    programs were traced and exported again each time), and sets of constants in sorted order (their `repr`
+    follows string hashing, which differs between processes)."""
+    return f"{code.co_code.hex()} {code.co_names} ({', '.join(_constant_text(c) for c in code.co_consts)})"
+
+
+def _constant_text(constant) -> str:
+    if isinstance(constant, types.CodeType):
+        return f"code {constant.co_qualname} [{_code_text(constant)}]"
+    if isinstance(constant, (frozenset, set)):
+        return f"frozenset({{{', '.join(sorted(_constant_text(c) for c in constant))}}})"
+    if isinstance(constant, tuple):
+        return f"({', '.join(_constant_text(c) for c in constant)},)"
+    return repr(constant)
 
 
 def _program_key(static, treedef, leaves, options) -> str | None:
