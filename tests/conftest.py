@@ -51,18 +51,11 @@ if os.environ.get("FFR_JAX_TEST_ONE_CORE_PER_WORKER") and _worker and hasattr(os
 import jax  # noqa: E402  (after XLA_FLAGS)
 
 
-# Python's cyclic garbage collector during tracing: tracing a solver and its adjoint allocates millions of small
-# objects that live until the program is lowered, and the default thresholds (700, 10, 10) scan them again and
-# again, the more so in a pytest worker, whose heap holds every earlier test's programs. The package pauses the
-# collector during its own first calls (ffr_jax/_compiled.py, `collector_paused`); the tests' own jax.jit calls
-# get the larger first threshold below. Measured on one core, one process, two runs each, alternating
-# (FFR_JAX_TEST_GC_DEFAULT=1 keeps Python's defaults): tests/test_problem.py 36.1 / 31.8 s -> 27.2 / 28.3 s,
-# `-m slow tests/test_reactions.py` 174.3 / 150.5 s -> 150.5 / 128.2 s. The collector stays on, so memory stays
-# bounded through long optimisation loops.
-if not os.environ.get("FFR_JAX_TEST_GC_DEFAULT"):
-    import gc
-
-    gc.set_threshold(100_000, 50, 100)
+# Python's garbage collector: the package pauses it during its own first calls (ffr_jax/_compiled.py,
+# `collector_paused`), which is where the suite's tracing happens. A larger first threshold for the whole suite on top
+# of that was measured and dropped: tests/test_problem.py + tests/test_sensitivity.py on one core, the two settings
+# at once on the two cores, 107.1 s with Python's thresholds against 105.7 s at (100000, 10, 10), peak RSS within
+# the run-to-run spread (benchmarks/RESULTS.md, "Python's garbage collector during tracing").
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
