@@ -11,9 +11,9 @@ the same structure and shapes log nothing.
 Python's cyclic garbage collector is paused during that first call (`collector_paused`; the kept programs of
 `_sensitivity/_cached.py` use it too). Tracing a solver and its adjoint allocates millions of small objects
 (tracers, jaxpr equations, their parameters) that all live until the program is lowered; the collector starts a
-collection every 700 net allocations and scans them again and again, none of them garbage. On the README mechanism's gradient it took ~8 % of the first call's
-samples (`perf`), and its tracing 5.3-6.5 s with it on against 4.5-5.3 s paused (`benchmarks/RESULTS.md`,
-"Compile time"). The process's setting is the user's and is restored after (a collector the user turned off
+collection every 700 net allocations and scans them again and again, none of them garbage. On the README
+mechanism's gradient it took ~8 % of the first call's samples (`perf`), and its tracing 5.3-6.5 s with it on
+against 4.5-5.3 s paused (`benchmarks/RESULTS.md`, "Compile time"). The process's setting is the user's and is restored after (a collector the user turned off
 stays off; a nested pause changes nothing); what became garbage meanwhile goes at the next collection.
 
 The signature that decides "first call" is the one `filter_jit` caches on: the tree structure of the
