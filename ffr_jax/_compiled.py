@@ -13,8 +13,9 @@ Python's cyclic garbage collector is paused during that first call (`collector_p
 (tracers, jaxpr equations, their parameters) that all live until the program is lowered; the collector starts a
 collection every 700 net allocations and scans them again and again, none of them garbage. On the README
 mechanism's gradient it took ~8 % of the first call's samples (`perf`), and its tracing 5.3-6.5 s with it on
-against 4.5-5.3 s paused (`benchmarks/RESULTS.md`, "Compile time"). The process's setting is the user's and is restored after (a collector the user turned off
-stays off; a nested pause changes nothing); what became garbage meanwhile goes at the next collection.
+against 4.5-5.3 s paused (`benchmarks/RESULTS.md`, "Compile time"). The process's setting is the user's and is
+restored after (a collector the user turned off stays off; a nested pause changes nothing); what became garbage
+meanwhile goes at the next collection.
 
 The signature that decides "first call" is the one `filter_jit` caches on: the tree structure of the
 arguments, their non-array leaves (hashable, as `filter_jit` requires) and the shapes and dtypes of
