@@ -527,45 +527,40 @@ def kept_call(function, args: tuple, directory: pathlib.Path, what: str, out_lik
         return None
     if key not in _KEPT:
         with collector_paused():  # tracing allocates millions of objects that live until lowered
-            return _keep(function, args, directory, what, out_like, key, static, treedef, shapes)
+            logger = logging.getLogger("ffr_jax")
+            path = _load_path(key, directory / "programs")
+            loading = path.is_file()
+            logger.info("%s %s (first call in this process for these shapes and settings)...",
+                        "loading" if loading else "compiling", what)
+            start = time.perf_counter()
+            flat = _flat(function, static, treedef)
+            exported = _load(path)
+            if exported is None and not _unexportable(path):
+                with _checks_as_nan():
+                    exported = _try_export(path, flat, shapes, what)
+            # The output's structure from the caller, checked against the exported program's outputs: the export is
+            # then the only trace (before, a first process traced the function abstractly once more for it).
+            structure = _structure(out_like, exported)
+            if structure is None:
+                structure = eqx.partition(eqx.filter_eval_shape(function, *args), _is_array)
+                if out_like is not None and (jax.tree_util.tree_structure(eqx.partition(out_like, _is_array)[0])
+                                             != jax.tree_util.tree_structure(structure[0])):
+                    # The caller's structure is not the output's: a later process could not rebuild the output
+                    # from it, so nothing is kept (the plain compiled path runs).
+                    logger.info("%s: the expected output structure differs from the traced one; not kept", what)
+                    return None
+            out_dynamic, out_static = structure
+            if exported is None:
+                compiled = jax.jit(flat).lower(*shapes).compile(_options())
+            else:  # XLA: from the persistent cache when it has the program
+                compiled = jax.jit(exported.call).lower(*shapes).compile(_options())
+            _KEPT[key] = _Kept(compiled, out_static, jax.tree_util.tree_structure(out_dynamic), exported is not None
+                               and loading, time.perf_counter() - start)
+            out = _KEPT[key](function, args)
+            logger.info("%s: %s and ran in %.1f s (cache: %s)", what, "loaded" if _KEPT[key].loaded else "compiled",
+                        time.perf_counter() - start, directory)
+            return out
     return _KEPT[key](function, args)
-
-
-def _keep(function, args, directory, what, out_like, key, static, treedef, shapes):
-    """`kept_call`'s first call for `key`: load or trace, export and compile its program, then run it."""
-    logger = logging.getLogger("ffr_jax")
-    path = _load_path(key, directory / "programs")
-    loading = path.is_file()
-    logger.info("%s %s (first call in this process for these shapes and settings)...",
-                "loading" if loading else "compiling", what)
-    start = time.perf_counter()
-    flat = _flat(function, static, treedef)
-    exported = _load(path)
-    if exported is None and not _unexportable(path):
-        with _checks_as_nan():
-            exported = _try_export(path, flat, shapes, what)
-    # The output's structure from the caller, checked against the exported program's outputs: the export is
-    # then the only trace (before, a first process traced the function abstractly once more for it).
-    structure = _structure(out_like, exported)
-    if structure is None:
-        structure = eqx.partition(eqx.filter_eval_shape(function, *args), _is_array)
-        if out_like is not None and (jax.tree_util.tree_structure(eqx.partition(out_like, _is_array)[0])
-                                     != jax.tree_util.tree_structure(structure[0])):
-            # The caller's structure is not the output's: a later process could not rebuild the output
-            # from it, so nothing is kept (the plain compiled path runs).
-            logger.info("%s: the expected output structure differs from the traced one; not kept", what)
-            return None
-    out_dynamic, out_static = structure
-    if exported is None:
-        compiled = jax.jit(flat).lower(*shapes).compile(_options())
-    else:  # XLA: from the persistent cache when it has the program
-        compiled = jax.jit(exported.call).lower(*shapes).compile(_options())
-    _KEPT[key] = _Kept(compiled, out_static, jax.tree_util.tree_structure(out_dynamic), exported is not None
-                       and loading, time.perf_counter() - start)
-    out = _KEPT[key](function, args)
-    logger.info("%s: %s and ran in %.1f s (cache: %s)", what, "loaded" if _KEPT[key].loaded else "compiled",
-                time.perf_counter() - start, directory)
-    return out
 
 
 def cached_value_and_grad(case: Case, x, method: AbstractSensitivity, *, rtol: float, atol: float, solver=None,
